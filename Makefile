@@ -1,0 +1,38 @@
+# foottof developer entry points. Each target creates/uses the local virtualenv .venv.
+PYTHON ?= python3.11
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: demo test test-slow lint bench terrain-png clean
+
+$(STAMP): pyproject.toml
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e ".[dev]"
+	touch $(STAMP)
+
+# Main job on a CPU-sized default: a short training run (configs/cpu.py).
+demo: $(STAMP)
+	$(PY) train.py --config configs/cpu.py
+
+# Fast suite (what CI runs): everything not marked slow, plus lint.
+test: $(STAMP)
+	$(VENV)/bin/ruff check .
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 -q
+
+test-slow: $(STAMP)
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q
+
+lint: $(STAMP)
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/ruff format --check .
+
+bench: $(STAMP)
+	$(PY) bench/bench_env.py
+
+terrain-png: $(STAMP)
+	$(PY) -m foottof.terrain.preview --out docs/terrains.png
+
+clean:
+	rm -rf $(VENV) runs .pytest_cache

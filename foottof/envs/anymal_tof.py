@@ -1,0 +1,469 @@
+"""Goal-reaching ANYmal-D environment on discrete terrain with foot ToF sensing (Brax Env, MJX)."""
+
+from __future__ import annotations
+
+import math
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+from brax.envs.base import Env, State
+from flax import struct
+from mujoco import mjx
+
+from foottof import constants
+from foottof.envs import rewards as rw
+from foottof.envs import sensing
+from foottof.envs.randomization import EpisodeParams, odometry_noise, sample_episode_params
+from foottof.robot import control, kinematics
+from foottof.robot.model import make_model
+from foottof.terrain import curriculum
+from foottof.terrain.terrain_map import (
+    TerrainMap,
+    TerrainMapSpec,
+    build_terrain_map,
+    sample_spawn_goal,
+)
+
+SOURCES = sensing.SOURCES
+EPISODE_METRICS = (
+    "episode/success",
+    "episode/failed",
+    "episode/goal_dist_m",
+    "episode/progress",
+    "curriculum/level",
+    "episode/speed_ms",
+)
+
+
+@struct.dataclass
+class TaskState:
+    """Per-env task bookkeeping carried in ``State.info['task']``.
+
+    Attributes:
+      rng: PRNG key of this env.
+      step: control steps since the episode started (int32).
+      level, col: curriculum level and terrain column of the current tile (int32).
+      spawn: (4,) spawn x, y, yaw, surface z; goal: (2,) goal x, y [m].
+      last_action: (12,) previous action; last_qvel: (12,) joint velocities one step ago.
+      last_torque: (12,) torques of the last substep [N m].
+      params: per-episode randomization.
+      min_goal_dist: smallest goal distance reached this episode [m].
+    """
+
+    rng: jax.Array
+    step: jax.Array
+    level: jax.Array
+    col: jax.Array
+    spawn: jax.Array
+    goal: jax.Array
+    last_action: jax.Array
+    last_qvel: jax.Array
+    last_torque: jax.Array
+    params: EpisodeParams
+    min_goal_dist: jax.Array
+
+
+def _yaw_quat(yaw):
+    return jp.stack([jp.cos(yaw / 2), 0.0 * yaw, 0.0 * yaw, jp.sin(yaw / 2)])
+
+
+def _quat_rotate_inv(quat, v):
+    """Rotate world vector(s) v (..., 3) into the frame of unit quaternion ``quat`` (w, x, y, z)."""
+    r = kinematics.quat_to_mat(quat)
+    return jp.einsum("ji,...j->...i", r, v)
+
+
+class AnymalToFEnv(Env):
+    """Reach a goal across a terrain tile; Brax ``Env`` API (single env; vmap for many).
+
+    ``reset(key) -> State`` and ``step(state, action) -> State``; the step auto-resets finished
+    episodes inside the compiled step (the returned state holds the new episode's observation with
+    ``done = 1`` and the finished episode's reward). ``State.info['truncation']`` is 1 at the time
+    limit (bootstrap), ``State.obs`` is ``{'state': actor obs, 'privileged_state': critic obs}``.
+
+    Args:
+      cfg: the full config (configs/base.py layout).
+      source: foot-reading source, one of SOURCES.
+      terrain_map: a prebuilt map (default: built from ``cfg.terrain`` for ``cfg.stage``).
+      shank_scale: shank length scale of the *physics* model (evaluation perturbation); the
+        policy-side kinematics stay nominal.
+    """
+
+    def __init__(
+        self,
+        cfg,
+        source: str = "tof",
+        terrain_map: TerrainMap | None = None,
+        shank_scale: float = 1.0,
+    ):
+        if source not in SOURCES:
+            raise ValueError(f"unknown source {source!r}; valid sources: {list(SOURCES)}")
+        rw.check_scales(cfg.reward.scales)
+        self.cfg = cfg
+        self.source = source
+        self.shank_scale = float(shank_scale)
+        ecfg = cfg.env
+        if terrain_map is None:
+            spec = TerrainMapSpec.from_config(cfg.terrain, int(cfg.stage))
+            terrain_map = build_terrain_map(jax.random.PRNGKey(int(cfg.seed)), spec)
+        self.tmap = terrain_map
+        self.hfield = terrain_map.hfield.clipped()
+        self.mj_model = make_model(
+            terrain_map.hfield, shank_scale=self.shank_scale, **dict(ecfg.model)
+        )
+        self.mx = mjx.put_model(self.mj_model)
+        d0 = mujoco.MjData(self.mj_model)
+        mujoco.mj_resetDataKeyframe(self.mj_model, d0, 0)
+        mujoco.mj_forward(self.mj_model, d0)
+        self._d0 = mjx.put_data(self.mj_model, d0)
+        self._foot_geom_ids = np.array(
+            [self.mj_model.geom(n).id for n in constants.FOOT_GEOMS], np.int32
+        )
+        self._base_body_id = self.mj_model.body(constants.BASE_BODY).id
+        self._base_mass = float(self.mj_model.body_mass[self._base_body_id])
+        self._default_q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
+        self._stand_height = kinematics.nominal_base_height(
+            constants.DEFAULT_POSE, self.shank_scale, constants.FOOT_RADIUS_M
+        )
+        self.dt = constants.CONTROL_DT_S
+        self.episode_steps = int(round(float(ecfg.episode_length_s) / self.dt))
+        self._push_interval = max(int(round(float(ecfg.push_interval_s) / self.dt)), 2)
+        self.sensing = sensing.Sensing(cfg, source, self.hfield, self.shank_scale)
+        self._obs_sizes = None
+
+    # ----------------------------------------------------------------------------------------
+    # Brax Env API
+    @property
+    def observation_size(self):
+        if self._obs_sizes is None:
+            st = jax.eval_shape(self.reset, jax.random.PRNGKey(0))
+            self._obs_sizes = {k: v.shape[-1] for k, v in st.obs.items()}
+        return dict(self._obs_sizes)
+
+    @property
+    def action_size(self) -> int:
+        return constants.NUM_JOINTS
+
+    @property
+    def backend(self) -> str:
+        return "mjx"
+
+    def reset(self, rng: jax.Array) -> State:
+        """Starts an episode on a random tile at curriculum level drawn from the initial range."""
+        key_lvl, key_col, key_ep = jax.random.split(rng, 3)
+        max_init = min(int(self.cfg.terrain.init_level_max), self.tmap.num_levels - 1)
+        level = jax.random.randint(key_lvl, (), 0, max_init + 1)  # level ~ U{0..init_level_max}
+        col = jax.random.randint(key_col, (), 0, self.tmap.num_cols)  # column ~ U{0..C-1}
+        return self._reset_episode(key_ep, level, col)
+
+    def step(self, state: State, action: jax.Array) -> State:
+        """One 50 Hz control step (4 physics substeps), rewards, terminations, auto-reset."""
+        task: TaskState = state.info["task"]
+        p = task.params
+        rng, key_push, key_reset, key_obs = jax.random.split(task.rng, 4)
+        action = jp.clip(action, -float(self.cfg.env.clip_actions), float(self.cfg.env.clip_actions))
+        q_target = self._default_q + constants.ACTION_SCALE * action
+        d = state.pipeline_state
+        # Push: add a random horizontal base velocity every push interval.
+        push_now = (task.step == p.push_step) & bool(self.cfg.env.randomization.enabled)
+        push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
+        push = push * float(self.cfg.env.randomization.push_vel_ms) * push_now
+        d = d.replace(qvel=d.qvel.at[0:2].add(push))
+        mx = self._episode_model(p)
+        kp = float(self.cfg.env.kp) * p.kp_scale
+        kd = float(self.cfg.env.kd) * p.kd_scale
+        d, taus = control.control_step(mx, d, q_target, kp * p.motor_strength, kd * p.motor_strength)
+        d = d.replace(qpos=jp.nan_to_num(d.qpos), qvel=jp.nan_to_num(d.qvel))
+        step = task.step + 1
+
+        # Kinematics for rewards / terminations (analytic FK on the physics model).
+        qpos, qvel = d.qpos, d.qvel
+        base_pos, base_quat = qpos[0:3], qpos[3:7]
+        fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
+        foot_pos = fk.foot_pos  # (4, 3)
+        foot_vel = self._foot_velocities(d)
+        foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
+        contact = (foot_clear < constants.FOOT_RADIUS_M + float(self.cfg.env.contact_margin_m))
+        contact = contact.astype(jp.float32)
+        gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
+        failed = self._failed(d, gravity, foot_pos)
+        truncated = (step >= self.episode_steps) & ~failed
+        done = failed | truncated
+        dist = jp.linalg.norm(task.goal - base_pos[:2])
+
+        rin = rw.RewardInputs(
+            base_pos=base_pos,
+            base_lin_vel=qvel[0:3],
+            goal_xy=task.goal,
+            projected_gravity=gravity,
+            torques=taus[-1],
+            qvel=qvel[6:18],
+            last_qvel=task.last_qvel,
+            action=action,
+            last_action=task.last_action,
+            foot_vel=foot_vel,
+            foot_contact=contact,
+            q=qpos[7:19],
+            default_q=self._default_q,
+            time_s=step.astype(jp.float32) * self.dt,
+            failed=failed.astype(jp.float32),
+            truncated=truncated.astype(jp.float32),
+        )
+        terms = rw.scaled_terms(
+            rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
+        )
+        reward = sum(terms.values())
+        success = (truncated & (dist < float(self.cfg.reward.success_radius_m))).astype(jp.float32)
+
+        # Continue or auto-reset (curriculum update on the finished episode).
+        cont = task.replace(
+            rng=rng,
+            step=step,
+            last_action=action,
+            last_qvel=qvel[6:18],
+            last_torque=taus[-1],
+            min_goal_dist=jp.minimum(task.min_goal_dist, dist),
+        )
+        new_level, new_col = self._curriculum(key_reset, task, dist, success)
+        fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
+        sel = lambda a, b: jax.tree_util.tree_map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
+        next_task = sel(fresh_task, cont)
+        next_d = sel(fresh_d, d)
+        # Sensing on the selected pose: one ray cast per step; buffers restart where done.
+        sensor_state, sense = self.sensing.step(
+            state.info["sensor"], key_obs, next_d, next_task.params, done
+        )
+        obs = self._observe(next_d, next_task, sense, key_obs)
+        metrics = {f"reward/{k}": v for k, v in terms.items()}
+        metrics.update(
+            {
+                "episode/success": success,
+                "episode/failed": failed.astype(jp.float32),
+                "episode/goal_dist_m": dist,
+                "episode/progress": self._progress(task, dist),
+                "curriculum/level": task.level.astype(jp.float32),
+                "episode/speed_ms": jp.linalg.norm(qvel[0:2]),
+            }
+        )
+        info = dict(state.info)
+        info.update(task=next_task, sensor=sensor_state, truncation=truncated.astype(jp.float32))
+        return State(
+            pipeline_state=next_d,
+            obs=obs,
+            reward=reward,
+            done=done.astype(jp.float32),
+            metrics=metrics,
+            info=info,
+        )
+
+    # ----------------------------------------------------------------------------------------
+    # Internals
+    def _episode_model(self, p: EpisodeParams) -> mjx.Model:
+        """The MJX model with this episode's foot friction and base mass (only these leaves vary)."""
+        fr = self.mx.geom_friction.at[self._foot_geom_ids, 0].set(p.friction)
+        mass = self.mx.body_mass.at[self._base_body_id].set(self._base_mass + p.added_mass_kg)
+        return self.mx.replace(geom_friction=fr, body_mass=mass)
+
+    def _foot_velocities(self, d) -> jax.Array:
+        """(4, 3) world foot-centre velocities from the base twist and joint rates (FK Jacobian)."""
+        qpos, qvel = d.qpos, d.qvel
+
+        def feet_world(q):
+            return kinematics.world_foot_kinematics(
+                jp.concatenate([qpos[:7], q]), self.shank_scale
+            ).foot_pos
+
+        fk, dfk = jax.jvp(feet_world, (qpos[7:19],), (qvel[6:18],))
+        rot = kinematics.quat_to_mat(qpos[3:7])
+        omega_w = rot @ qvel[3:6]  # free-joint angular velocity is in the body frame
+        lever = fk - qpos[0:3]
+        return qvel[0:3] + jp.cross(omega_w, lever) + dfk
+
+    def _failed(self, d, gravity, foot_pos) -> jax.Array:
+        """Base or knee touches the terrain, robot falls into a gap, or bad orientation."""
+        ecfg = self.cfg.env
+        qpos = d.qpos
+        base_pos, base_quat = qpos[0:3], qpos[3:7]
+        from foottof.robot.model import BASE_SPHERE_CENTRES_M, BASE_SPHERE_RADIUS_M
+        from foottof.robot.model import KNEE_SPHERE_RADIUS_M
+
+        centres = kinematics.base_to_world(
+            jp.asarray(BASE_SPHERE_CENTRES_M, jp.float32), base_pos, base_quat
+        )
+        base_clear = centres[:, 2] - self.hfield.height_at(centres[:, :2]) - BASE_SPHERE_RADIUS_M
+        knees = self._knee_positions(qpos)
+        knee_clear = knees[:, 2] - self.hfield.height_at(knees[:, :2]) - KNEE_SPHERE_RADIUS_M
+        body_contact = (jp.min(base_clear) < float(ecfg.body_contact_margin_m)) | (
+            jp.min(knee_clear) < float(ecfg.body_contact_margin_m)
+        )
+        fell = base_pos[2] < self.hfield.z_floor_m + float(ecfg.fall_height_above_floor_m)
+        fell = fell | (jp.min(foot_pos[:, 2]) < float(ecfg.foot_fall_z_m))
+        flipped = gravity[2] > -math.cos(math.radians(float(ecfg.max_tilt_deg)))
+        bad = ~jp.all(jp.isfinite(d.qpos)) | ~jp.all(jp.isfinite(d.qvel))
+        return body_contact | fell | flipped | bad
+
+    def _knee_positions(self, qpos) -> jax.Array:
+        """(4, 3) world positions of the KFE axes (knee spheres)."""
+        t = kinematics._leg_table(self.shank_scale, constants.TOF_TILT_DEG)
+        q = qpos[7:19].reshape(4, 3)
+        r_haa = kinematics._rot_x(q[:, 0])
+        r_thigh = r_haa @ kinematics._rot_y(q[:, 1])
+        p_thigh = t["hip"] + jp.einsum("kij,kj->ki", r_haa, t["hfe"])
+        knee_b = p_thigh + jp.einsum("kij,kj->ki", r_thigh, t["kfe"])
+        return kinematics.base_to_world(knee_b, qpos[0:3], qpos[3:7])
+
+    def _progress(self, task: TaskState, dist) -> jax.Array:
+        start = jp.linalg.norm(task.goal - task.spawn[:2])
+        return 1.0 - dist / jp.maximum(start, 1e-3)
+
+    def _curriculum(self, key, task: TaskState, dist, success):
+        level = curriculum.update_levels(
+            key,
+            task.level,
+            done=jp.ones((), bool),
+            reached_goal=success > 0,
+            progress=self._progress(task, dist),
+            num_levels=self.tmap.num_levels,
+            down_progress_frac=float(self.cfg.terrain.down_progress_frac),
+        )
+        return level, task.col
+
+    def _reset_episode(self, key, level, col) -> State:
+        """A fresh episode on tile (level, col), with sensing and observation."""
+        key_core, key_sense, key_obs = jax.random.split(key, 3)
+        d, task = self._reset_core(key_core, level, col)
+        sensor_state, sense = self.sensing.reset(key_sense, d, task.params)
+        obs = self._observe(d, task, sense, key_obs)
+        zero = jp.zeros(())
+        metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
+        metrics.update({k: zero for k in EPISODE_METRICS})
+        return State(
+            pipeline_state=d,
+            obs=obs,
+            reward=zero,
+            done=zero,
+            metrics=metrics,
+            info={"task": task, "sensor": sensor_state, "truncation": zero},
+        )
+
+    def _reset_core(self, key, level, col):
+        """Physics state and task state of a fresh episode on tile (level, col) (no sensing)."""
+        key_sg, key_par, key_pose, key_rng = jax.random.split(key, 4)
+        spawn, goal = sample_spawn_goal(key_sg, self.tmap, level, col)
+        params = sample_episode_params(
+            key_par, self.cfg.env.randomization, self._push_interval
+        )
+        # Initial pose: nominal stance, joint noise ~ U(+-init_joint_noise_rad) (wider in stage 2).
+        kq, kr = jax.random.split(key_pose)
+        jn = float(self.cfg.env.init_joint_noise_rad)
+        q0 = self._default_q + jax.random.uniform(kq, (12,), minval=-jn, maxval=jn)
+        rp = jax.random.uniform(kr, (2,), minval=-1.0, maxval=1.0) * float(
+            self.cfg.env.init_roll_pitch_rad
+        )
+        quat = _euler_to_quat(rp[0], rp[1], spawn[2])
+        z = spawn[3] + self._stand_height + float(self.cfg.env.spawn_height_offset_m)
+        qpos = jp.concatenate([jp.array([spawn[0], spawn[1]]), z[None], quat, q0])
+        d = self._d0.replace(
+            qpos=qpos.astype(self._d0.qpos.dtype),
+            qvel=jp.zeros_like(self._d0.qvel),
+            qacc_warmstart=jp.zeros_like(self._d0.qacc_warmstart),
+            ctrl=jp.zeros_like(self._d0.ctrl),
+        )
+        task = TaskState(
+            rng=key_rng,
+            step=jp.zeros((), jp.int32),
+            level=jp.asarray(level, jp.int32),
+            col=jp.asarray(col, jp.int32),
+            spawn=spawn,
+            goal=goal,
+            last_action=jp.zeros(12),
+            last_qvel=jp.zeros(12),
+            last_torque=jp.zeros(12),
+            params=params,
+            min_goal_dist=jp.linalg.norm(goal - spawn[:2]),
+        )
+        return d, task
+
+    def _observe(self, d, task: TaskState, sense, key) -> dict[str, jax.Array]:
+        """Actor and critic observations.
+
+        Actor ``state``: tof (4 x Z readings [m]) + valid (4 x Z) + joint pos rel. to default (12,
+        noisy, + static offset) + joint vel (12, noisy) + projected gravity (3) + base lin vel est.
+        (3, base frame) + base ang vel est. (3) + goal distance (1, clipped at 5 m) + goal direction
+        in the base frame (2, unit) + time left (1, fraction) + last action (12).
+        Critic ``privileged_state``: actor obs without noise + true foot-surrounding heights
+        (4 x 9) + contacts (4) + friction (1) + added mass (1) + noise-free readings (4 x Z).
+        """
+        p = task.params
+        qpos, qvel = d.qpos, d.qvel
+        base_quat = qpos[3:7]
+        k1, k2, k3 = jax.random.split(key, 3)
+        q_rel = qpos[7:19] - self._default_q
+        qd = qvel[6:18]
+        q_meas = q_rel + p.joint_offset_rad + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))
+        qd_meas = qd + p.joint_vel_noise_rads * jax.random.normal(k2, (12,))
+        gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
+        lin_b = _quat_rotate_inv(base_quat, qvel[0:3])
+        ang_b = qvel[3:6]
+        ocfg = self.cfg.env
+        lin_n, ang_n = odometry_noise(
+            k3, p.odometry_level, float(ocfg.odometry_lin_noise_ms), float(ocfg.odometry_ang_noise_rads)
+        )
+        to_goal_w = jp.concatenate([task.goal - qpos[0:2], jp.zeros(1)])
+        to_goal_b = _quat_rotate_inv(base_quat, to_goal_w)[:2]
+        dist = jp.linalg.norm(to_goal_b)
+        direction = to_goal_b / jp.maximum(dist, 1e-6)
+        time_left = 1.0 - task.step.astype(jp.float32) / self.episode_steps
+        goal_feats = jp.concatenate([jp.minimum(dist, 5.0)[None], direction, time_left[None]])
+
+        def actor(tof, valid, q_in, qd_in, lin, ang):
+            return jp.concatenate(
+                [
+                    tof.reshape(-1),  # 4 feet x Z zones [m]
+                    valid.reshape(-1),  # 4 feet x Z zones {0, 1}
+                    q_in,  # 12 joint positions rel. to default [rad]
+                    qd_in * 0.05,  # 12 joint velocities [rad/s] scaled
+                    gravity,  # 3 projected gravity
+                    lin,  # 3 base linear velocity estimate [m/s]
+                    ang * 0.25,  # 3 base angular velocity estimate [rad/s] scaled
+                    goal_feats,  # 4 goal distance [m], direction (2), time left
+                    task.last_action,  # 12
+                ]
+            )
+
+        state_obs = actor(sense.distance, sense.valid, q_meas, qd_meas, lin_b + lin_n, ang_b + ang_n)
+        clean = actor(sense.true_distance, sense.true_valid, q_rel, qd, lin_b, ang_b)
+        fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
+        offs = jp.array(
+            [[dx, dy] for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1)], jp.float32
+        )
+        pts = fk.foot_pos[:, None, :2] + offs[None]  # (4, 9, 2)
+        heights = self.hfield.height_at(pts) - fk.foot_pos[:, None, 2]  # rel. to foot centre
+        clear = fk.foot_pos[:, 2] - self.hfield.height_at(fk.foot_pos[:, :2])
+        contact = (clear < constants.FOOT_RADIUS_M + float(ocfg.contact_margin_m)).astype(jp.float32)
+        priv = jp.concatenate(
+            [
+                clean,
+                jp.clip(heights.reshape(-1), -1.0, 1.0),  # 4 feet x 9 heights [m]
+                contact,  # 4
+                p.friction[None],  # 1
+                p.added_mass_kg[None] * 0.1,  # 1
+            ]
+        )
+        return {"state": state_obs, "privileged_state": priv}
+
+
+def _euler_to_quat(roll, pitch, yaw) -> jax.Array:
+    cr, sr = jp.cos(roll / 2), jp.sin(roll / 2)
+    cp, sp = jp.cos(pitch / 2), jp.sin(pitch / 2)
+    cy, sy = jp.cos(yaw / 2), jp.sin(yaw / 2)
+    return jp.stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )

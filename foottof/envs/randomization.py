@@ -1,0 +1,79 @@
+"""Per-episode domain randomization: friction, base mass, motor strength, PD gains, noise, pushes."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+from flax import struct
+
+
+@struct.dataclass
+class EpisodeParams:
+    """Per-env physical and observation parameters, drawn at every reset.
+
+    Attributes:
+      friction: foot sliding friction coefficient [-].
+      added_mass_kg: mass added to the base [kg].
+      motor_strength: multiplier of the PD torque [-].
+      kp_scale, kd_scale: multipliers of the nominal PD gains [-].
+      joint_pos_noise_rad: std of Gaussian noise on joint position readings [rad].
+      joint_vel_noise_rads: std of Gaussian noise on joint velocity readings [rad/s].
+      joint_offset_rad: (12,) static offset added to joint readings (evaluation hook, 0 in training).
+      odometry_level: multiple of the 100% odometry noise (+-0.1 m/s, +-0.2 rad/s uniform per axis).
+      push_step: control step of the next push (int32).
+    """
+
+    friction: jax.Array
+    added_mass_kg: jax.Array
+    motor_strength: jax.Array
+    kp_scale: jax.Array
+    kd_scale: jax.Array
+    joint_pos_noise_rad: jax.Array
+    joint_vel_noise_rads: jax.Array
+    joint_offset_rad: jax.Array
+    odometry_level: jax.Array
+    push_step: jax.Array
+
+
+def _u(key, lo_hi) -> jax.Array:
+    lo, hi = lo_hi
+    return jax.random.uniform(key, (), minval=lo, maxval=hi)
+
+
+def sample_episode_params(key: jax.Array, rcfg, push_interval_steps: int) -> EpisodeParams:
+    """Draws one env's parameters.
+
+    Args:
+      key: PRNG key.
+      rcfg: the `env.randomization` config section (ranges are (lo, hi) tuples).
+      push_interval_steps: mean control steps between pushes (static).
+    """
+    keys = jax.random.split(key, 9)
+    enabled = bool(rcfg.enabled)
+
+    def draw(k, rng, nominal):
+        return _u(k, rng) if enabled else jp.asarray(nominal, jp.float32)
+
+    return EpisodeParams(
+        friction=draw(keys[0], rcfg.friction_range, rcfg.nominal_friction),  # ~ U(range)
+        added_mass_kg=draw(keys[1], rcfg.added_mass_kg_range, 0.0),  # ~ U(range)
+        motor_strength=draw(keys[2], rcfg.motor_strength_range, 1.0),  # ~ U(range)
+        kp_scale=draw(keys[3], rcfg.kp_scale_range, 1.0),  # ~ U(range)
+        kd_scale=draw(keys[4], rcfg.kd_scale_range, 1.0),  # ~ U(range)
+        joint_pos_noise_rad=draw(keys[5], (0.0, rcfg.joint_pos_noise_rad), 0.0),  # ~ U[0, upper]
+        joint_vel_noise_rads=draw(keys[6], (0.0, rcfg.joint_vel_noise_rads), 0.0),  # ~ U[0, upper]
+        joint_offset_rad=jp.full((12,), rcfg.joint_offset_rad, jp.float32),  # evaluation hook
+        odometry_level=jp.asarray(rcfg.odometry_level, jp.float32),  # 1.0 = paper's 100 %
+        # first push ~ U{push_interval/2 .. 3 push_interval/2}
+        push_step=jax.random.randint(
+            keys[8], (), push_interval_steps // 2, 3 * push_interval_steps // 2 + 1
+        ),
+    )
+
+
+def odometry_noise(key: jax.Array, level: jax.Array, lin_ms: float, ang_rads: float):
+    """Uniform per-axis velocity-estimate noise: (3,) linear [m/s] and (3,) angular [rad/s]."""
+    k1, k2 = jax.random.split(key)
+    lin = jax.random.uniform(k1, (3,), minval=-1.0, maxval=1.0) * lin_ms * level
+    ang = jax.random.uniform(k2, (3,), minval=-1.0, maxval=1.0) * ang_rads * level
+    return lin, ang

@@ -1,0 +1,117 @@
+"""Reward terms of the goal-reaching task: pure functions of a RewardInputs struct, scaled by config."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+from flax import struct
+
+# Terms that are rates (multiplied by the control dt) vs. events (counted once).
+DENSE_TERMS = (
+    "guidance",
+    "torques",
+    "joint_acc",
+    "action_rate",
+    "foot_slip",
+    "orientation",
+    "stall",
+    "jump",
+    "posture",
+)
+SPARSE_TERMS = ("reach", "termination")
+REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
+
+
+@struct.dataclass
+class RewardInputs:
+    """Everything the reward terms read, for one env at one control step (world frame unless noted).
+
+    Attributes:
+      base_pos: (3,) base position [m].
+      base_lin_vel: (3,) base linear velocity [m/s].
+      goal_xy: (2,) goal position [m].
+      projected_gravity: (3,) gravity direction in the base frame (unit).
+      torques: (12,) applied joint torques [N m] (last substep).
+      qvel: (12,) joint velocities now [rad/s].
+      last_qvel: (12,) joint velocities one control step earlier [rad/s].
+      action: (12,) action now; last_action: (12,) previous action.
+      foot_vel: (4, 3) foot velocities [m/s]; foot_contact: (4,) 1.0 where a foot touches the ground.
+      q: (12,) joint positions [rad]; default_q: (12,) nominal stance [rad].
+      time_s: time since the episode started [s].
+      failed: 1.0 on a failure termination; truncated: 1.0 at the time limit.
+    """
+
+    base_pos: jax.Array
+    base_lin_vel: jax.Array
+    goal_xy: jax.Array
+    projected_gravity: jax.Array
+    torques: jax.Array
+    qvel: jax.Array
+    last_qvel: jax.Array
+    action: jax.Array
+    last_action: jax.Array
+    foot_vel: jax.Array
+    foot_contact: jax.Array
+    q: jax.Array
+    default_q: jax.Array
+    time_s: jax.Array
+    failed: jax.Array
+    truncated: jax.Array
+
+
+def goal_distance(x: RewardInputs) -> jax.Array:
+    """Horizontal distance from the base to the goal [m]."""
+    return jp.linalg.norm(x.goal_xy - x.base_pos[:2])
+
+
+def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.Array]:
+    """Unscaled reward terms (each a scalar), keyed by REWARD_TERMS.
+
+    Args:
+      x: the inputs of this step.
+      rcfg: the `reward` config section (radii, speeds, grace time).
+      control_dt_s: control period, used for joint accelerations [s].
+    """
+    dist = goal_distance(x)
+    at_goal = (dist < rcfg.success_radius_m).astype(jp.float32)
+    to_goal = (x.goal_xy - x.base_pos[:2]) / jp.maximum(dist, 1e-6)
+    v_toward = jp.dot(x.base_lin_vel[:2], to_goal)
+    vmax = rcfg.guidance_max_speed_ms
+    # Dense guidance: speed toward the goal (clipped); full credit once within the success radius.
+    guidance = jp.where(at_goal > 0, vmax, jp.clip(v_toward, -vmax, vmax))
+    speed = jp.linalg.norm(x.base_lin_vel[:2])
+    stalling = (speed < rcfg.stall_speed_ms) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
+    foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
+    return {
+        "reach": x.truncated * at_goal,
+        "termination": x.failed,
+        "guidance": guidance,
+        "torques": jp.sum(jp.square(x.torques)),
+        "joint_acc": jp.sum(jp.square((x.qvel - x.last_qvel) / control_dt_s)),
+        "action_rate": jp.sum(jp.square(x.action - x.last_action)),
+        "foot_slip": jp.sum(x.foot_contact * foot_speed_sq),
+        "orientation": jp.sum(jp.square(x.projected_gravity[:2])),
+        "stall": stalling.astype(jp.float32),
+        "jump": jp.all(x.foot_contact < 0.5).astype(jp.float32),
+        "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
+    }
+
+
+def scaled_terms(terms: dict[str, jax.Array], scales, control_dt_s: float) -> dict[str, jax.Array]:
+    """Scale each term by config; dense terms are also multiplied by the control dt."""
+    out = {}
+    for name in REWARD_TERMS:
+        dt = control_dt_s if name in DENSE_TERMS else 1.0
+        out[name] = terms[name] * float(getattr(scales, name)) * dt
+    return out
+
+
+def check_scales(scales) -> None:
+    """Raise ValueError for unknown or missing reward terms in `reward.scales`."""
+    keys = set(scales.keys())
+    unknown = sorted(keys - set(REWARD_TERMS))
+    missing = sorted(set(REWARD_TERMS) - keys)
+    if unknown:
+        raise ValueError(f"unknown reward term(s) {unknown}; valid terms: {list(REWARD_TERMS)}")
+    if missing:
+        raise ValueError(f"reward.scales is missing term(s) {missing}; valid terms: {list(REWARD_TERMS)}")

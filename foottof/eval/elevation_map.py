@@ -1,0 +1,361 @@
+"""Robot-centric height scans: the ideal top-down scan and a camera-aggregated elevation map."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+from flax import struct
+
+from foottof.eval import cameras as cam_lib
+from foottof.robot.kinematics import quat_to_mat
+from foottof.terrain.heightfield import Heightfield
+
+# Robot-centric scan grid (paper: 5 m x 5 m at 5 cm). Frame: gravity aligned, rotated by the base
+# yaw, origin at the base; vertex (i, j) at x = -2.5 + 0.05 j, y = -2.5 + 0.05 i (Heightfield
+# layout), value = terrain height minus base z [m].
+SCAN_CELL_M = 0.05  # scan vertex spacing [m]
+SCAN_HALF_SIZE_M = 2.5  # scan half extent along x and y [m]
+SCAN_N = 101  # vertices per side (5 m / 5 cm + 1)
+SCAN_Z_FLOOR_M = -4.0  # lowest representable relative height [m] (Heightfield z_floor_m)
+SCAN_Z_RANGE_M = 6.0  # representable relative heights [-4, +2] m (Heightfield z_range_m)
+# Value of cells the map has never seen: a hole 4 m below the base, far beyond the 1 m ToF range,
+# so a foot ray that would hit an unknown cell gets no return (the same reading as over a deep gap).
+UNKNOWN_HEIGHT_M = SCAN_Z_FLOOR_M
+
+# Stored map: a grid fixed in the estimated odometry frame (axes of the initial base yaw frame),
+# scrolled by whole cells to stay centred on the estimated base. 145 vertices (+-3.6 m) cover the
+# 5 m x 5 m scan at any yaw (2.5 * sqrt(2) = 3.54 m) plus one cell of scroll slack.
+MAP_N = 145  # stored vertices per side
+_MAP_C = (MAP_N - 1) // 2  # index of the centre vertex
+
+# Odometry (estimated base velocity) noise at the 100 % level: uniform per axis, per step (paper).
+ODOM_LIN_NOISE_MS = 0.1  # linear velocity noise half-width [m/s]
+ODOM_ANG_NOISE_RADS = 0.2  # angular velocity noise half-width [rad/s]
+
+
+def scan_heightfield(heights: jax.Array) -> Heightfield:
+    """Wrap (101, 101) robot-centric heights [m, relative to base z] as a static-origin Heightfield."""
+    if heights.shape[-2:] != (SCAN_N, SCAN_N):
+        raise ValueError(f"scan heights must have shape (..., {SCAN_N}, {SCAN_N}), got {heights.shape}")
+    return Heightfield(
+        heights=heights,
+        x0_m=-SCAN_HALF_SIZE_M,
+        y0_m=-SCAN_HALF_SIZE_M,
+        cell_m=SCAN_CELL_M,
+        z_floor_m=SCAN_Z_FLOOR_M,
+        z_range_m=SCAN_Z_RANGE_M,
+    )
+
+
+def scan_xy() -> jax.Array:
+    """(101, 101, 2) x, y of the scan vertices in the robot-centric yaw frame [m]."""
+    c = jp.linspace(-SCAN_HALF_SIZE_M, SCAN_HALF_SIZE_M, SCAN_N)
+    x, y = jp.meshgrid(c, c)  # x varies along columns j, y along rows i
+    return jp.stack([x, y], axis=-1)
+
+
+def yaw_from_quat(quat: jax.Array) -> jax.Array:
+    """(..., 4) quaternion (w, x, y, z) -> (...,) yaw [rad] (ZYX Euler)."""
+    w, x, y, z = jp.moveaxis(quat, -1, 0)
+    return jp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+
+
+def _rot_z(yaw: jax.Array) -> jax.Array:
+    c, s = jp.cos(yaw), jp.sin(yaw)
+    o, z = jp.ones_like(yaw), jp.zeros_like(yaw)
+    return jp.stack([jp.stack([c, -s, z], -1), jp.stack([s, c, z], -1), jp.stack([z, z, o], -1)], -2)
+
+
+def tilt_rotation(base_quat: jax.Array) -> jax.Array:
+    """(..., 3, 3) base axes in the yaw frame: roll and pitch only (``Rz(-yaw) @ R_base``)."""
+    r = quat_to_mat(base_quat)
+    return jp.swapaxes(_rot_z(yaw_from_quat(base_quat)), -1, -2) @ r
+
+
+def _terrain_rel(hfield: Heightfield, base_pos: jax.Array, base_yaw: jax.Array, r_xy: jax.Array):
+    """Terrain height minus base z at yaw-frame points (..., 2) [m]."""
+    c, s = jp.cos(base_yaw), jp.sin(base_yaw)
+    wx = base_pos[0] + c * r_xy[..., 0] - s * r_xy[..., 1]
+    wy = base_pos[1] + s * r_xy[..., 0] + c * r_xy[..., 1]
+    return hfield.height_at(jp.stack([wx, wy], axis=-1)) - base_pos[2]
+
+
+def height_scan(hfield: Heightfield, base_pos: jax.Array, base_yaw: jax.Array) -> jax.Array:
+    """Ideal, noise-free top-down scan of the terrain around the base (mock_ideal).
+
+    Each vertex samples MuJoCo's triangulated terrain surface straight below it (a vertical ray
+    against the terrain only, no robot).
+
+    Args:
+      hfield: world terrain.
+      base_pos: (3,) world base position [m].
+      base_yaw: () base yaw [rad].
+
+    Returns:
+      (101, 101) terrain height minus base z [m] at the scan vertices (see SCAN_* constants).
+    """
+    return _terrain_rel(hfield, base_pos, base_yaw, scan_xy())
+
+
+@struct.dataclass
+class ElevationMapState:
+    """Aggregated elevation map of one env (mock_aggre).
+
+    Memory lives in a grid fixed in the *estimated* odometry frame (the initial base yaw frame,
+    propagated by dead reckoning) and scrolled by whole cells, so cells outside the cameras' view
+    are never re-interpolated step after step (no numerical blur); they move into the current base
+    frame only through the estimated pose. The robot-centric ``scan`` is rebuilt every update.
+
+    Attributes:
+      heights: (145, 145) stored terrain z in the odometry frame [m]; vertex (i, j) at odometry
+        x = (center_idx[0] + j - 72) * 0.05, y = (center_idx[1] + i - 72) * 0.05.
+      known: (145, 145) bool, the stored vertex has been seen.
+      center_idx: (2,) int32 odometry (x, y) cell index of the stored grid's centre vertex.
+      pose_est: (4,) estimated base x, y, z [m] and yaw [rad] in the odometry frame.
+      scan: (101, 101) robot-centric heights relative to the base z [m] (scan_heightfield
+        layout): fresh ground truth in view, the moved prior elsewhere, UNKNOWN_HEIGHT_M if never
+        seen.
+      scan_known: (101, 101) bool, the scan vertex is in view or was seen before.
+      scan_in_view: (101, 101) bool, the scan vertex is seen by a camera at this step.
+    """
+
+    heights: jax.Array
+    known: jax.Array
+    center_idx: jax.Array
+    pose_est: jax.Array
+    scan: jax.Array
+    scan_known: jax.Array
+    scan_in_view: jax.Array
+
+
+def _map_xy(center_idx: jax.Array) -> jax.Array:
+    """(145, 145, 2) odometry-frame x, y of the stored vertices [m]."""
+    k = jp.arange(MAP_N) - _MAP_C
+    x = (center_idx[0] + k)[None, :] * SCAN_CELL_M
+    y = (center_idx[1] + k)[:, None] * SCAN_CELL_M
+    return jp.stack(jp.broadcast_arrays(x, y), axis=-1)
+
+
+def _odom_to_robot(p_xy: jax.Array, pose_est: jax.Array) -> jax.Array:
+    """Odometry-frame (..., 2) points -> estimated robot-centric yaw frame (..., 2)."""
+    c, s = jp.cos(pose_est[3]), jp.sin(pose_est[3])
+    dx, dy = p_xy[..., 0] - pose_est[0], p_xy[..., 1] - pose_est[1]
+    return jp.stack([c * dx + s * dy, -s * dx + c * dy], axis=-1)
+
+
+def _robot_to_odom(r_xy: jax.Array, pose_est: jax.Array) -> jax.Array:
+    c, s = jp.cos(pose_est[3]), jp.sin(pose_est[3])
+    x = pose_est[0] + c * r_xy[..., 0] - s * r_xy[..., 1]
+    y = pose_est[1] + s * r_xy[..., 0] + c * r_xy[..., 1]
+    return jp.stack([x, y], axis=-1)
+
+
+def _in_view(r_xy, h_rel, tilt, cameras, see_all: bool) -> jax.Array:
+    """Camera visibility of yaw-frame terrain points (r_xy (..., 2), height h_rel (...))."""
+    if see_all:
+        return jp.ones(h_rel.shape, dtype=bool)
+    p_yaw = jp.concatenate([r_xy, h_rel[..., None]], axis=-1)
+    p_base = p_yaw @ tilt  # tilt^T p: yaw frame -> base frame
+    return cam_lib.visible(p_base, cameras)
+
+
+def _camera_update(state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all):
+    """Overwrite stored vertices seen by a camera with ground truth (placed via pose_est)."""
+    r_xy = _odom_to_robot(_map_xy(state.center_idx), state.pose_est)  # where the robot thinks
+    h_rel = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy)  # what the camera sees
+    seen = _in_view(r_xy, h_rel, tilt_rotation(base_quat), cameras, see_all)
+    heights = jp.where(seen, h_rel + state.pose_est[2], state.heights)
+    return state.replace(heights=heights, known=state.known | seen)
+
+
+def _sample_map(state: ElevationMapState, p_xy: jax.Array):
+    """Bilinear sample of the stored map at odometry (..., 2) points -> (z, known)."""
+    u = p_xy[..., 0] / SCAN_CELL_M - state.center_idx[0] + _MAP_C  # fractional column
+    v = p_xy[..., 1] / SCAN_CELL_M - state.center_idx[1] + _MAP_C  # fractional row
+    inside = (u >= 0.0) & (u <= MAP_N - 1) & (v >= 0.0) & (v <= MAP_N - 1)
+    j = jp.clip(jp.floor(u).astype(jp.int32), 0, MAP_N - 2)
+    i = jp.clip(jp.floor(v).astype(jp.int32), 0, MAP_N - 2)
+    fu, fv = jp.clip(u - j, 0.0, 1.0), jp.clip(v - i, 0.0, 1.0)
+    h, k = state.heights, state.known
+    z = (
+        h[i, j] * (1 - fu) * (1 - fv)
+        + h[i, j + 1] * fu * (1 - fv)
+        + h[i + 1, j] * (1 - fu) * fv
+        + h[i + 1, j + 1] * fu * fv
+    )
+    known = inside & k[i, j] & k[i, j + 1] & k[i + 1, j] & k[i + 1, j + 1]
+    return z, known
+
+
+def _compose_scan(state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all):
+    """Robot-centric scan: ground truth where a camera sees it, else the moved prior."""
+    r_xy = scan_xy()
+    gt = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy)
+    seen = _in_view(r_xy, gt, tilt_rotation(base_quat), cameras, see_all)
+    prior, known = _sample_map(state, _robot_to_odom(r_xy, state.pose_est))
+    prior_rel = prior - state.pose_est[2]
+    scan = jp.where(seen, gt, jp.where(known, prior_rel, UNKNOWN_HEIGHT_M))
+    return state.replace(scan=scan, scan_known=seen | known, scan_in_view=seen)
+
+
+def aggre_init(
+    hfield: Heightfield,
+    base_pos: jax.Array,
+    base_quat: jax.Array,
+    cameras: tuple[cam_lib.Camera, ...] = cam_lib.CAMERAS,
+    see_all: bool = False,
+    full_prior: bool = True,
+) -> ElevationMapState:
+    """Start an elevation map at the true base pose (the odometry frame's origin).
+
+    Args:
+      hfield: world terrain.
+      base_pos: (3,) world base position [m].
+      base_quat: (4,) base orientation (w, x, y, z).
+      cameras: static camera tuple.
+      see_all: static; True makes every cell visible (the map then equals the ideal scan).
+      full_prior: static; True starts from a complete ideal survey of the +-3.6 m surroundings
+        (as if the robot had mapped them while standing), False from the cameras' first view only
+        (the belly and feet zones start unknown).
+
+    Returns:
+      ElevationMapState with pose_est = 0.
+    """
+    dtype = jp.asarray(base_pos).dtype
+    state = ElevationMapState(
+        heights=jp.zeros((MAP_N, MAP_N), dtype),
+        known=jp.zeros((MAP_N, MAP_N), bool),
+        center_idx=jp.zeros(2, jp.int32),
+        pose_est=jp.zeros(4, dtype),
+        scan=jp.zeros((SCAN_N, SCAN_N), dtype),
+        scan_known=jp.zeros((SCAN_N, SCAN_N), bool),
+        scan_in_view=jp.zeros((SCAN_N, SCAN_N), bool),
+    )
+    state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all or full_prior)
+    return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)
+
+
+def _scroll(state: ElevationMapState) -> ElevationMapState:
+    """Re-centre the stored grid on the estimated base by whole cells (exact, no resampling)."""
+    new_center = jp.round(state.pose_est[:2] / SCAN_CELL_M).astype(jp.int32)
+    shift = new_center - state.center_idx  # (dx, dy) cells
+    k = jp.arange(MAP_N)
+    src_i = k[:, None] + shift[1]
+    src_j = k[None, :] + shift[0]
+    inside = (src_i >= 0) & (src_i < MAP_N) & (src_j >= 0) & (src_j < MAP_N)
+    ci, cj = jp.clip(src_i, 0, MAP_N - 1), jp.clip(src_j, 0, MAP_N - 1)
+    return state.replace(
+        heights=jp.where(inside, state.heights[ci, cj], 0.0),
+        known=inside & state.known[ci, cj],
+        center_idx=new_center,
+    )
+
+
+def dead_reckon(
+    pose_est: jax.Array,
+    base_quat: jax.Array,
+    lin_vel_est_base: jax.Array,
+    ang_vel_est_base: jax.Array,
+    dt: float,
+) -> jax.Array:
+    """Zero-order integration of estimated base velocities over one step.
+
+    Roll and pitch come from ``base_quat`` (known from the IMU); its yaw is not used. Velocities
+    are rotated into the yaw frame of the estimated pose and held constant over ``dt``.
+
+    Args:
+      pose_est: (4,) estimated x, y, z [m], yaw [rad] in the odometry frame.
+      base_quat: (4,) true base orientation (w, x, y, z); only roll and pitch are used.
+      lin_vel_est_base: (3,) estimated linear velocity in the base frame [m/s].
+      ang_vel_est_base: (3,) estimated angular velocity in the base frame [rad/s].
+      dt: step duration [s].
+
+    Returns:
+      (4,) the new estimated pose.
+    """
+    tilt = tilt_rotation(base_quat)
+    v = tilt @ lin_vel_est_base  # yaw-frame linear velocity [m/s]
+    yaw_rate = (tilt @ ang_vel_est_base)[2]  # world-z angular rate [rad/s]
+    c, s = jp.cos(pose_est[3]), jp.sin(pose_est[3])
+    dpos = jp.stack([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]) * dt
+    return jp.concatenate([pose_est[:3] + dpos, pose_est[3:] + yaw_rate * dt])
+
+
+def aggre_update(
+    state: ElevationMapState,
+    hfield: Heightfield,
+    base_pos: jax.Array,
+    base_quat: jax.Array,
+    lin_vel_est_base: jax.Array,
+    ang_vel_est_base: jax.Array,
+    dt: float,
+    cameras: tuple[cam_lib.Camera, ...] = cam_lib.CAMERAS,
+    see_all: bool = False,
+) -> ElevationMapState:
+    """One elevation-map update: move the prior by odometry, then overwrite what the cameras see.
+
+    Args:
+      state: map after the previous step.
+      hfield: world terrain (ground truth for the cells in view).
+      base_pos: (3,) true world base position [m] (where the cameras really are).
+      base_quat: (4,) true base orientation (w, x, y, z).
+      lin_vel_est_base: (3,) estimated base linear velocity in the base frame [m/s] (with
+        odometry noise, see noisy_odometry).
+      ang_vel_est_base: (3,) estimated base angular velocity in the base frame [rad/s].
+      dt: time since the previous update [s] (> 0).
+      cameras: static camera tuple.
+      see_all: static; True makes every cell visible.
+
+    Returns:
+      The updated ElevationMapState.
+    """
+    if isinstance(dt, (int, float)) and not dt > 0.0:
+        raise ValueError(f"dt={dt} must be > 0 s")
+    state = state.replace(
+        pose_est=dead_reckon(state.pose_est, base_quat, lin_vel_est_base, ang_vel_est_base, dt)
+    )
+    state = _scroll(state)
+    state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all)
+    return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)
+
+
+def noisy_odometry(
+    key: jax.Array, lin_vel_base: jax.Array, ang_vel_base: jax.Array, level: float
+) -> tuple[jax.Array, jax.Array]:
+    """Estimated base velocities: truth plus uniform per-axis noise scaled by ``level``.
+
+    Args:
+      key: PRNG key for this step's noise.
+      lin_vel_base: (..., 3) true linear velocity in the base frame [m/s].
+      ang_vel_base: (..., 3) true angular velocity in the base frame [rad/s].
+      level: noise level, 1.0 = 100 % (+-0.1 m/s, +-0.2 rad/s); >= 0.
+
+    Returns:
+      (lin_vel_est (..., 3), ang_vel_est (..., 3)).
+    """
+    if isinstance(level, (int, float)) and not level >= 0.0:
+        raise ValueError(f"odometry noise level={level} must be >= 0 (1.0 = 100 %)")
+    key_lin, key_ang = jax.random.split(key)
+    # lin noise ~ U(-0.1 level, 0.1 level) m/s, ang noise ~ U(-0.2 level, 0.2 level) rad/s per axis.
+    n_lin = jax.random.uniform(key_lin, lin_vel_base.shape, lin_vel_base.dtype, -1.0, 1.0)
+    n_ang = jax.random.uniform(key_ang, ang_vel_base.shape, ang_vel_base.dtype, -1.0, 1.0)
+    return (
+        lin_vel_base + level * ODOM_LIN_NOISE_MS * n_lin,
+        ang_vel_base + level * ODOM_ANG_NOISE_RADS * n_ang,
+    )
+
+
+def memory_error(state: ElevationMapState, ideal_scan: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Drift of the remembered (out-of-view, known) scan cells against the ideal scan.
+
+    Args:
+      state: current map.
+      ideal_scan: (101, 101) height_scan at the true pose.
+
+    Returns:
+      (mean absolute error [m], number of cells counted).
+    """
+    mask = state.scan_known & ~state.scan_in_view
+    n = jp.sum(mask)
+    err = jp.sum(jp.where(mask, jp.abs(state.scan - ideal_scan), 0.0)) / jp.maximum(n, 1)
+    return err, n

@@ -1,0 +1,180 @@
+"""Orbax checkpoints of the whole TrainState (atomic, keep-last-N) and init_from loading.
+
+Layout: <run_dir>/checkpoints/<iteration>/ with orbax items 'params', 'opt_state', 'normalizer',
+'progress' (PRNG key, iteration), optionally 'rollout' (env state, LSTM carries, episode
+accumulators) and 'manifest' (JSON: leaf names, shapes, dtypes of every item). Each item is saved
+as a flat dict {'leaf_0000': array, ...} in jax.tree_util flatten order; the manifest names the
+leaves (`jax.tree_util.keystr`), so any pytree (flax structs, optax states, MJX data) round-trips
+and a mismatch error names the leaf. Orbax writes into a temporary folder and renames it when done.
+"""
+
+import os
+from typing import Any
+
+import jax
+import numpy as np
+import orbax.checkpoint as ocp
+
+from foottof.ppo.train import TrainState
+
+ITEMS = {
+    "params": ("params",),
+    "opt_state": ("opt_state",),
+    "normalizer": ("normalizer",),
+    "progress": ("key", "iteration"),
+    "rollout": ("env_state", "carry", "prev_done", "ep_return", "ep_length"),
+}
+CHECKPOINT_SUBDIR = "checkpoints"
+
+
+def _sub(state: TrainState, item: str) -> dict:
+    return {f: getattr(state, f) for f in ITEMS[item]}
+
+
+def _flatten(tree: Any) -> tuple[dict, list]:
+    leaves = jax.tree_util.tree_flatten_with_path(tree)[0]
+    flat = {f"leaf_{i:04d}": leaf for i, (_, leaf) in enumerate(leaves)}
+    manifest = [
+        [jax.tree_util.keystr(path), list(np.shape(leaf)), str(getattr(leaf, "dtype", "float"))]
+        for path, leaf in leaves
+    ]
+    return flat, manifest
+
+
+def _abstract(tree: Any) -> dict:
+    leaves = jax.tree.leaves(tree)
+    return {
+        f"leaf_{i:04d}": jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=getattr(x, "sharding", None))
+        for i, x in enumerate(leaves)
+    }
+
+
+def check_compatible(item: str, saved_manifest: list, target: Any, source: str) -> None:
+    """Raises ValueError naming the first leaf whose name or shape differs from `target`."""
+    _, expected = _flatten(jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), target))
+    saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
+    for name, shape, _ in expected:
+        if name not in saved:
+            raise ValueError(f"{source}: {item} leaf {name} is missing in the checkpoint")
+        if saved[name] != tuple(shape):
+            raise ValueError(
+                f"{source}: {item} leaf {name} has shape {saved[name]} in the checkpoint but "
+                f"{tuple(shape)} in this model"
+            )
+    extra = sorted(set(saved) - {name for name, _, _ in expected})
+    if extra:
+        raise ValueError(f"{source}: {item} leaf {extra[0]} is in the checkpoint but not in this model")
+
+
+class Checkpointer:
+    """Saves/restores TrainStates under <run_dir>/checkpoints (synchronous, atomic)."""
+
+    def __init__(self, run_dir: str, max_to_keep: int = 5, save_env_state: bool = True):
+        if max_to_keep < 1:
+            raise ValueError(f"max_to_keep={max_to_keep}; must be >= 1")
+        self.directory = os.path.abspath(os.path.join(run_dir, CHECKPOINT_SUBDIR))
+        self.save_env_state = save_env_state
+        self._manager = ocp.CheckpointManager(
+            self.directory,
+            options=ocp.CheckpointManagerOptions(
+                max_to_keep=max_to_keep, create=True, enable_async_checkpointing=False
+            ),
+        )
+
+    def save(self, state: TrainState) -> int:
+        """Writes `state` as checkpoint number state.iteration; returns that number."""
+        step = int(state.iteration)
+        items = [i for i in ITEMS if i != "rollout" or self.save_env_state]
+        args, manifest = {}, {}
+        for item in items:
+            flat, manifest[item] = _flatten(_sub(state, item))
+            args[item] = ocp.args.StandardSave(flat)
+        args["manifest"] = ocp.args.JsonSave(manifest)
+        self._manager.save(step, args=ocp.args.Composite(**args), force=True)
+        self._manager.wait_until_finished()
+        return step
+
+    def latest_step(self) -> int | None:
+        return self._manager.latest_step()
+
+    def all_steps(self) -> list[int]:
+        return list(self._manager.all_steps())
+
+    def manifest(self, step: int) -> dict:
+        return self._manager.restore(
+            step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
+        ).manifest
+
+    def restore(self, target: TrainState, step: int | None = None) -> tuple[TrainState, bool]:
+        """Restores checkpoint `step` (default latest) into the structure/shardings of `target`.
+
+        Returns:
+          (state, restored_rollout): fields of items missing in the checkpoint ('rollout' when
+          saved with save_env_state=False) keep `target`'s values.
+        """
+        step = self.latest_step() if step is None else step
+        if step is None:
+            raise FileNotFoundError(f"no checkpoint in {self.directory}")
+        manifest = self.manifest(step)
+        items = [i for i in ITEMS if i in manifest]
+        for item in items:
+            check_compatible(item, manifest[item], _sub(target, item), f"checkpoint {step}")
+        args = {i: ocp.args.StandardRestore(_abstract(_sub(target, i))) for i in items}
+        restored = self._manager.restore(step, args=ocp.args.Composite(**args))
+        fields = {}
+        for item in items:
+            sub = _sub(target, item)
+            treedef = jax.tree.structure(sub)
+            flat = restored[item]
+            leaves = [flat[f"leaf_{i:04d}"] for i in range(treedef.num_leaves)]
+            fields.update(jax.tree.unflatten(treedef, leaves))
+        return target.replace(**fields), "rollout" in items
+
+    def close(self) -> None:
+        self._manager.close()
+
+
+def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple[Any, Any]:
+    """Params + normalizer of another run (init_from), shaped like `params`/`normalizer`.
+
+    Args:
+      path: a run directory, its checkpoints/ folder, or one checkpoint's step folder.
+      params, normalizer: the current model's (initialized) values; give structure and sharding.
+
+    Raises:
+      FileNotFoundError if there is no checkpoint there; ValueError naming the leaf and both
+      shapes if the saved network does not fit this model.
+    """
+    path = os.path.abspath(path)
+    step = None
+    if os.path.isdir(os.path.join(path, CHECKPOINT_SUBDIR)):
+        directory = os.path.join(path, CHECKPOINT_SUBDIR)
+    elif os.path.basename(path).isdigit() and os.path.isdir(path):
+        directory, step = os.path.dirname(path), int(os.path.basename(path))
+    else:
+        directory = path
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(f"init_from: no checkpoint directory at {path}")
+    manager = ocp.CheckpointManager(directory, options=ocp.CheckpointManagerOptions(create=False))
+    try:
+        step = manager.latest_step() if step is None else step
+        if step is None or step not in manager.all_steps():
+            raise FileNotFoundError(f"init_from: no checkpoint found in {directory}")
+        manifest = manager.restore(
+            step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
+        ).manifest
+        target = {"params": {"params": params}, "normalizer": {"normalizer": normalizer}}
+        for item, sub in target.items():
+            if item not in manifest:
+                raise ValueError(f"init_from {directory}/{step}: checkpoint has no {item!r}")
+            check_compatible(item, manifest[item], sub, f"init_from {directory}/{step}")
+        args = {item: ocp.args.StandardRestore(_abstract(sub)) for item, sub in target.items()}
+        restored = manager.restore(step, args=ocp.args.Composite(**args))
+    finally:
+        manager.close()
+    out = []
+    for item, sub in target.items():
+        treedef = jax.tree.structure(sub)
+        leaves = [restored[item][f"leaf_{i:04d}"] for i in range(treedef.num_leaves)]
+        out.append(jax.tree.unflatten(treedef, leaves)[item])
+    return out[0], out[1]

@@ -1,0 +1,251 @@
+"""Python training loop: run dir, config, CSV/TensorBoard logs, checkpoints, resume, NaN guard, Ctrl-C."""
+
+import csv
+import json
+import math
+import os
+import time
+from collections.abc import Callable
+
+import jax
+import ml_collections
+import numpy as np
+
+from foottof.ppo import checkpoint as ckpt
+from foottof.ppo import train as train_lib
+
+CPU_MAX_NUM_ENVS = 256  # above this many envs on a CPU backend the run is GPU-sized: warn
+_WATCHED = ("loss/policy", "loss/value", "loss/entropy", "ppo/kl")  # NaN guard (plus params)
+
+
+class NonFiniteError(FloatingPointError):
+    """A loss or a parameter became NaN/inf; training stopped, the last good checkpoint is kept."""
+
+
+def _prepare_cfg(cfg: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
+    cfg = cfg.copy_and_resolve_references()
+    cfg.lock()  # typos in later overrides raise instead of adding keys
+    t = cfg.train
+    for name in ("num_iterations", "checkpoint_every", "max_checkpoints", "log_every"):
+        if int(t[name]) < 1:
+            raise ValueError(f"train.{name}={t[name]}; must be a positive integer")
+    return cfg
+
+
+def _fmt_duration(seconds: float) -> str:
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = int(round(seconds))
+    return f"{seconds // 3600:d}:{seconds // 60 % 60:02d}:{seconds % 60:02d}"
+
+
+def format_line(it: int, total: int, sps: float, eta_s: float, m: dict) -> str:
+    """One progress line (what the runner prints per iteration)."""
+    g = lambda k: m.get(k, float("nan"))
+    parts = [
+        f"it {it}/{total}",
+        f"{sps / 1e3:.1f}k steps/s",
+        f"ETA {_fmt_duration(eta_s)}",
+        f"return {g('train/episode_return'):.3g}",
+        f"len {g('train/episode_length'):.3g}",
+    ]
+    if "episode/success" in m:
+        parts.append(f"success {g('episode/success'):.3f}")
+    if "curriculum/level" in m:
+        parts.append(f"level {g('curriculum/level'):.2f}")
+    parts.append(
+        f"loss pi {g('loss/policy'):.3g} v {g('loss/value'):.3g} ent {g('loss/entropy'):.3g}"
+    )
+    parts.append(f"kl {g('ppo/kl'):.3g} lr {g('ppo/learning_rate'):.2e} std {g('ppo/action_std'):.3g}")
+    rewards = [f"{k[len('reward/'):]} {v:.3g}" for k, v in sorted(m.items()) if k.startswith("reward/")]
+    if rewards:
+        parts.append("reward: " + " ".join(rewards))
+    return " | ".join(parts)
+
+
+class _Logs:
+    """metrics.csv (appended on resume) + TensorBoard event files in the run dir."""
+
+    def __init__(self, run_dir: str, tensorboard: bool):
+        self.path = os.path.join(run_dir, "metrics.csv")
+        self.fields = None
+        if os.path.exists(self.path):
+            with open(self.path) as f:
+                header = f.readline().strip()
+            self.fields = header.split(",") if header else None
+        self.writer = None
+        if tensorboard:
+            from tensorboardX import SummaryWriter
+
+            self.writer = SummaryWriter(run_dir)
+
+    def write(self, row: dict, step: int) -> None:
+        new = self.fields is None
+        if new:
+            self.fields = list(row)
+        with open(self.path, "a", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=self.fields, extrasaction="ignore")
+            if new:
+                w.writeheader()
+            w.writerow(row)
+        if self.writer is not None:
+            for k, v in row.items():
+                if k != "iteration":
+                    self.writer.add_scalar(k, v, step)
+
+    def close(self) -> None:
+        if self.writer is not None:
+            self.writer.close()
+
+
+def _write_config(cfg: ml_collections.ConfigDict, run_dir: str) -> None:
+    path = os.path.join(run_dir, "config.json")
+    text = cfg.to_json_best_effort(indent=2, sort_keys=True)
+    if os.path.exists(path):
+        with open(path) as f:
+            old = json.load(f)
+        new = json.loads(text)
+        changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
+        if changed:
+            print(f"[runner] config differs from the saved one in sections {changed}; overwriting")
+    tmp = path + ".tmp"
+    with open(tmp, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+    with open(os.path.join(run_dir, "config.yaml"), "w") as f:
+        f.write(cfg.to_yaml())
+
+
+def _alive(state) -> bool:
+    return not any(getattr(x, "is_deleted", lambda: False)() for x in jax.tree.leaves(state))
+
+
+def _params_finite(params) -> bool:
+    return all(bool(np.all(np.isfinite(np.asarray(x)))) for x in jax.tree.leaves(params))
+
+
+def run(
+    cfg: ml_collections.ConfigDict,
+    env,
+    run_dir: str,
+    *,
+    resume: bool = False,
+    init_from: str | None = None,
+    on_iteration: Callable[[int, dict, train_lib.TrainState], None] | None = None,
+) -> train_lib.TrainState:
+    """Trains for cfg.train.num_iterations iterations (counted from the start of the run).
+
+    Args:
+      cfg: full config with sections seed, ppo, network, train (copied and locked here).
+      env: batched env (foottof.ppo.train module docstring).
+      run_dir: folder of this run: config.json/.yaml, metrics.csv, TensorBoard events, checkpoints/.
+      resume: continue from the latest checkpoint in run_dir (bit-exact when
+        train.checkpoint_env_state; otherwise envs restart from a fresh reset drawn from the saved
+        key folded with the iteration).
+      init_from: run dir / checkpoint of another run: initial params + normalizer (stage 2 from
+        stage 1); optimizer state, iteration and envs start fresh.
+      on_iteration: callback(iteration, metrics, state) after each iteration (and after the NaN
+        guard); `state` is donated to the next iteration, so use it only inside the callback.
+
+    Returns:
+      The final TrainState.
+
+    Raises:
+      NonFiniteError: a loss or parameter became NaN/inf (no checkpoint is written for it).
+      KeyboardInterrupt: re-raised after saving a checkpoint of the last finished iteration.
+    """
+    cfg = _prepare_cfg(cfg)
+    if resume and init_from:
+        raise ValueError("give resume=True or init_from, not both")
+    t = cfg.train
+    has_ckpt = os.path.isdir(os.path.join(run_dir, ckpt.CHECKPOINT_SUBDIR)) and any(
+        n.isdigit() for n in os.listdir(os.path.join(run_dir, ckpt.CHECKPOINT_SUBDIR))
+    )
+    if resume and not has_ckpt:
+        raise FileNotFoundError(f"resume: no checkpoint in {run_dir}/{ckpt.CHECKPOINT_SUBDIR}")
+    if not resume and has_ckpt:
+        raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=True or a new run dir")
+    os.makedirs(run_dir, exist_ok=True)
+    _write_config(cfg, run_dir)
+
+    if jax.default_backend() == "cpu" and cfg.ppo.num_envs > CPU_MAX_NUM_ENVS:
+        print(
+            f"[runner] WARNING: ppo.num_envs={cfg.ppo.num_envs} is a GPU-sized config but JAX runs "
+            f"on CPU; override e.g. --config.ppo.num_envs=64 --config.network.lstm_hidden_size=64 "
+            f"(or use the CPU config)"
+        )
+
+    trainer = train_lib.make_train(env, cfg)
+    key = jax.random.PRNGKey(int(cfg.get("seed", 0)))
+    state = trainer.init(key)
+    checkpointer = ckpt.Checkpointer(run_dir, int(t.max_checkpoints), bool(t.checkpoint_env_state))
+    if resume:
+        state, restored_rollout = checkpointer.restore(state)
+        if not restored_rollout:
+            fresh = trainer.init(jax.random.fold_in(state.key, state.iteration))
+            state = state.replace(**{f: getattr(fresh, f) for f in ckpt.ITEMS["rollout"]})
+        print(f"[runner] resumed from iteration {int(state.iteration)} in {checkpointer.directory}")
+    elif init_from:
+        params, normalizer = ckpt.load_params_and_normalizer(init_from, state.params, state.normalizer)
+        state = state.replace(params=params, normalizer=normalizer)
+        print(f"[runner] params and normalizer initialized from {init_from}")
+
+    t0 = time.time()
+    iteration = trainer.iteration.lower(state).compile()
+    compile_s = time.time() - t0
+    print(
+        f"[runner] {len(trainer.mesh.devices.flat)} {jax.default_backend()} device(s), "
+        f"{trainer.num_envs} envs x {cfg.ppo.num_steps} steps, "
+        f"{train_lib.num_params(state.params)} params; compiled in {compile_s:.1f} s"
+    )
+
+    logs = _Logs(run_dir, bool(t.tensorboard))
+    total = int(t.num_iterations)
+    it = int(state.iteration)
+    last_saved = checkpointer.latest_step()
+    run_start, run_start_it = time.time(), it
+    try:
+        while it < total:
+            t_it = time.time()
+            state, metrics = iteration(state)
+            metrics = {k: float(v) for k, v in jax.device_get(metrics).items()}
+            it += 1
+            dt = time.time() - t_it
+            bad = [k for k in _WATCHED if not math.isfinite(metrics[k])]
+            if metrics["ppo/params_finite"] < 1.0:
+                bad.append("params")
+            if bad:
+                raise NonFiniteError(
+                    f"non-finite {', '.join(bad)} at iteration {it}; training stopped. Last good "
+                    f"checkpoint: iteration {last_saved} in {checkpointer.directory}"
+                )
+            sps = trainer.steps_per_iteration / dt
+            avg = (time.time() - run_start) / (it - run_start_it)
+            row = {
+                "iteration": it,
+                "env_steps": train_lib.env_steps(it, trainer),
+                "time/iteration_s": dt,
+                "time/compile_s": compile_s,
+                "training/sps": sps,
+                **metrics,
+            }
+            logs.write(row, it)
+            if it % int(t.log_every) == 0 or it == total:
+                print(format_line(it, total, sps, avg * (total - it), metrics), flush=True)
+            if on_iteration is not None:
+                on_iteration(it, metrics, state)
+            if it % int(t.checkpoint_every) == 0 or it == total:
+                last_saved = checkpointer.save(state)
+    except KeyboardInterrupt:
+        if _alive(state) and _params_finite(state.params):
+            step = int(state.iteration)
+            if step not in checkpointer.all_steps():
+                checkpointer.save(state)
+            print(f"[runner] interrupted: saved iteration {step} in {checkpointer.directory}")
+        else:
+            print(f"[runner] interrupted: kept checkpoint {last_saved} (state not saveable)")
+        raise
+    finally:
+        logs.close()
+        checkpointer.close()
+    return state

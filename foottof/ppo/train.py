@@ -1,0 +1,449 @@
+"""One compiled LSTM-PPO iteration (rollout + update epochs), data-parallel over a 'data' device mesh.
+
+Env contract (batched, Brax-style): `reset(keys (N, 2)) -> State`, `step(state, actions (N, A)) -> State`,
+auto-reset inside `step`, `State.obs` an (N, obs) array or a dict {'state': actor obs,
+'privileged_state': critic obs}, `State.reward` (N,), `State.done` (N,), `State.info['truncation']`
+(N,) (1 where the episode ended by its time limit), `State.metrics` a dict of (N,) arrays, `action_size`.
+Every leaf of the batched State must have the env axis first (it is sharded over devices).
+`wrap_brax_env` makes such an env from any single Brax `Env`; `VmapEnv` from a single env that
+auto-resets itself (our locomotion env).
+"""
+
+import math
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import jax
+import jax.numpy as jp
+import ml_collections
+import numpy as np
+import optax
+from brax.training.acme import running_statistics
+from flax import struct
+from jax.sharding import Mesh, NamedSharding
+from jax.sharding import PartitionSpec as P
+
+from foottof.ppo import losses
+from foottof.ppo import networks as net
+
+AXIS = "data"  # mesh axis over envs (all devices of all hosts)
+LR_SCHEDULES = ("adaptive", "fixed")
+EPISODE_PREFIX = "episode/"  # env metrics with this prefix are averaged over done steps only
+
+
+@struct.dataclass
+class TrainState:
+    """Everything one iteration reads and writes; N envs, H LSTM units."""
+
+    params: Any  # network variables (replicated)
+    opt_state: Any  # optax inject_hyperparams state; opt_state.hyperparams['learning_rate']
+    normalizer: running_statistics.RunningStatisticsState  # running obs statistics (replicated)
+    env_state: Any  # batched env State, leaves (N, ...) (sharded over 'data')
+    carry: Any  # LSTM carry before the next step, (N, H) leaves
+    prev_done: jax.Array  # (N,) bool: the last step ended an episode -> reset carry before acting
+    ep_return: jax.Array  # (N,) return of the running episode so far
+    ep_length: jax.Array  # (N,) steps of the running episode so far
+    key: jax.Array  # (2,) uint32 PRNG key of the next iteration
+    iteration: jax.Array  # () int32 completed iterations
+
+
+class Transition(NamedTuple):
+    """One rollout step for the local envs; leaves (T, N, ...) after the scan."""
+
+    obs: Any
+    resets: jax.Array  # episode starts at this step (carry reset before acting)
+    actions: jax.Array
+    log_probs: jax.Array
+    means: jax.Array
+    values: jax.Array
+    rewards: jax.Array
+    dones: jax.Array
+    truncation: jax.Array
+    finished_return: jax.Array  # episode return where done, else 0
+    finished_length: jax.Array  # episode length where done, else 0
+    metrics: dict
+
+
+class Train(NamedTuple):
+    """What make_train returns; `init` and `iteration` are jitted (iteration donates its input)."""
+
+    init: Callable[[jax.Array], TrainState]  # key (2,) -> TrainState
+    iteration: Callable[[TrainState], tuple[TrainState, dict]]  # state -> (state, scalar metrics)
+    networks: net.Networks
+    mesh: Mesh
+    state_sharding: Any  # TrainState of NamedSharding
+    num_envs: int
+    steps_per_iteration: int  # env steps per iteration over all envs (num_envs * num_steps)
+
+
+class VmapEnv:
+    """Batched view of a single env that auto-resets itself (reset/step vmapped over envs)."""
+
+    def __init__(self, env):
+        self.env = env
+
+    def reset(self, keys: jax.Array):
+        return jax.vmap(self.env.reset)(keys)
+
+    def step(self, state, actions: jax.Array):
+        return jax.vmap(self.env.step)(state, actions)
+
+    def __getattr__(self, name):
+        return getattr(self.env, name)
+
+
+def wrap_brax_env(env, episode_length: int, action_repeat: int = 1, randomization_fn=None):
+    """Any single Brax `Env` -> the batched, time-limited, auto-resetting env the trainer expects.
+
+    Brax's VmapWrapper + EpisodeWrapper (sets done and info['truncation'] at `episode_length`)
+    + AutoResetWrapper (resets to the env's first state of this env slot).
+    """
+    from brax.envs.wrappers import training as brax_training
+
+    if episode_length < 1:
+        raise ValueError(f"episode_length={episode_length}; must be >= 1")
+    return brax_training.wrap(env, episode_length, action_repeat, randomization_fn)
+
+
+def _validate(ppo: ml_collections.ConfigDict, num_devices: int) -> None:
+    for name in ("num_envs", "num_steps", "num_epochs", "num_minibatches"):
+        if int(ppo[name]) < 1:
+            raise ValueError(f"ppo.{name}={ppo[name]}; must be a positive integer")
+    if ppo.lr_schedule not in LR_SCHEDULES:
+        raise ValueError(f"ppo.lr_schedule={ppo.lr_schedule!r}; valid: {LR_SCHEDULES}")
+    if ppo.num_envs % num_devices:
+        raise ValueError(
+            f"ppo.num_envs={ppo.num_envs} is not divisible by the device count {num_devices}"
+        )
+    if (ppo.num_envs // num_devices) % ppo.num_minibatches:
+        raise ValueError(
+            f"ppo.num_envs={ppo.num_envs} is not divisible by ppo.num_minibatches * devices = "
+            f"{ppo.num_minibatches} * {num_devices}"
+        )
+    if not 0 < ppo.lr_min <= ppo.learning_rate <= ppo.lr_max:
+        raise ValueError(
+            f"ppo.learning_rate={ppo.learning_rate}; must lie in [lr_min, lr_max] = "
+            f"[{ppo.lr_min}, {ppo.lr_max}] with lr_min > 0"
+        )
+    for name in ("gamma", "gae_lambda"):
+        if not 0.0 <= ppo[name] <= 1.0:
+            raise ValueError(f"ppo.{name}={ppo[name]}; must lie in [0, 1]")
+
+
+def _check_env_state(state_shape, num_envs: int) -> None:
+    for path, leaf in jax.tree_util.tree_flatten_with_path(state_shape)[0]:
+        if leaf.ndim == 0 or leaf.shape[0] != num_envs:
+            raise ValueError(
+                f"env state leaf {jax.tree_util.keystr(path)} has shape {leaf.shape}; every leaf "
+                f"of the batched State needs the env axis first (num_envs={num_envs})"
+            )
+
+
+def _make_optimizer(learning_rate: float, max_grad_norm: float) -> optax.GradientTransformation:
+    """Global-norm clip + Adam; the learning rate lives in opt_state.hyperparams (adaptive rule)."""
+
+    def inner(learning_rate):
+        return optax.chain(optax.clip_by_global_norm(max_grad_norm), optax.adam(learning_rate))
+
+    return optax.inject_hyperparams(inner)(learning_rate=learning_rate)
+
+
+def _set_learning_rate(opt_state, lr):
+    return opt_state._replace(hyperparams={**opt_state.hyperparams, "learning_rate": lr})
+
+
+def adapt_learning_rate(lr, kl, desired_kl: float, lr_min: float, lr_max: float):
+    """rsl_rl adaptive rule: kl > 2 desired -> lr / 1.5; 0 < kl < desired / 2 -> lr * 1.5; clamped."""
+    lr = jp.where(kl > 2.0 * desired_kl, jp.maximum(lr / 1.5, lr_min), lr)
+    return jp.where((kl < 0.5 * desired_kl) & (kl > 0.0), jp.minimum(lr * 1.5, lr_max), lr)
+
+
+def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
+    """Builds the pure, jitted init and iteration functions.
+
+    Args:
+      env: batched env (see module docstring).
+      cfg: config with sections `ppo` and `network` (configs/_ppo.py).
+      devices: devices of the 'data' mesh; default all devices of all hosts (`jax.devices()`).
+
+    Returns:
+      Train(init, iteration, ...). `init(key) -> TrainState`; `iteration(state) -> (state, metrics)`
+      runs one rollout of ppo.num_steps steps in all envs and ppo.num_epochs x ppo.num_minibatches
+      gradient steps; metrics is a dict of scalars (see `_iteration_metrics`).
+    """
+    ppo = cfg.ppo
+    devices = list(jax.devices() if devices is None else devices)
+    _validate(ppo, len(devices))
+    num_envs, num_steps = int(ppo.num_envs), int(ppo.num_steps)
+    num_minibatches, num_epochs = int(ppo.num_minibatches), int(ppo.num_epochs)
+    gamma, lam = float(ppo.gamma), float(ppo.gae_lambda)
+    adaptive = ppo.lr_schedule == "adaptive"
+    desired_kl, lr_min, lr_max = float(ppo.desired_kl), float(ppo.lr_min), float(ppo.lr_max)
+    normalize_advantage = bool(ppo.normalize_advantage)
+    loss_kwargs = dict(
+        clip_param=float(ppo.clip_param),
+        value_loss_coef=float(ppo.value_loss_coef),
+        entropy_coef=float(ppo.entropy_coef),
+        use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
+    )
+
+    networks = net.make_networks(env.action_size, cfg.network)
+    optimizer = _make_optimizer(float(ppo.learning_rate), float(ppo.max_grad_norm))
+    mesh = Mesh(np.array(devices), (AXIS,))
+
+    env_shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((num_envs, 2), jp.uint32))
+    _check_env_state(env_shape, num_envs)
+    for name in ("truncation",):
+        if name not in env_shape.info:
+            raise ValueError(f"env State.info lacks {name!r} (N,); wrap Brax envs with wrap_brax_env")
+    clash = {"train/", "loss/", "ppo/"}
+    for k in env_shape.metrics:
+        if any(k.startswith(c) for c in clash):
+            raise ValueError(f"env metric {k!r} clashes with trainer metric prefixes {sorted(clash)}")
+    obs_example = jax.tree.map(lambda s: jp.zeros((1,) + s.shape[1:], s.dtype), env_shape.obs)
+
+    # Partition specs: params & co replicated, everything with an env axis sharded over AXIS.
+    spec = TrainState(
+        params=P(), opt_state=P(), normalizer=P(), env_state=P(AXIS), carry=P(AXIS),
+        prev_done=P(AXIS), ep_return=P(AXIS), ep_length=P(AXIS), key=P(), iteration=P(),
+    )  # fmt: skip
+
+    def _tree_spec(tree_spec, like):
+        # Broadcast each TrainState field's spec to all leaves of that field.
+        return jax.tree.map(
+            lambda s, sub: jax.tree.map(lambda _: s, sub),
+            tree_spec,
+            like,
+            is_leaf=lambda x: isinstance(x, P),
+        )
+
+    # ---------------------------------------------------------------- init
+    def _reset_envs(keys):
+        env_state = env.reset(keys)
+        n = keys.shape[0]
+        return (
+            env_state,
+            networks.init_carry(n),
+            jp.ones((n,), bool),
+            jp.zeros((n,), jp.float32),
+            jp.zeros((n,), jp.float32),
+        )
+
+    def _init(key):
+        key_params, key_env, key_next = jax.random.split(key, 3)
+        params = networks.init_params(key_params, obs_example)
+        opt_state = optimizer.init(params)
+        normalizer = networks.init_normalizer(obs_example)
+        keys = jax.random.split(key_env, num_envs)  # one reset key per env
+        reset = jax.shard_map(
+            _reset_envs, mesh=mesh, in_specs=P(AXIS), out_specs=P(AXIS), check_vma=False
+        )
+        env_state, carry, prev_done, ep_return, ep_length = reset(keys)
+        return TrainState(
+            params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
+            carry=carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
+            key=key_next, iteration=jp.zeros((), jp.int32),
+        )  # fmt: skip
+
+    state_shape = jax.eval_shape(_init, jax.ShapeDtypeStruct((2,), jp.uint32))
+    state_spec = _tree_spec(spec, state_shape)
+    state_sharding = jax.tree.map(
+        lambda s: NamedSharding(mesh, s), state_spec, is_leaf=lambda x: isinstance(x, P)
+    )
+    init = jax.jit(_init, out_shardings=state_sharding)
+
+    # ----------------------------------------------------------- rollout
+    def _rollout(state: TrainState, key):
+        params, normalizer = state.params, state.normalizer
+        log_std = params["params"]["log_std"]
+
+        def step(carry, key_step):
+            env_state, net_carry, prev_done, ep_return, ep_length = carry
+            obs = env_state.obs
+            net_carry, mean, _, value = networks.step(params, normalizer, net_carry, obs, prev_done)
+            action = mean + jp.exp(log_std) * jax.random.normal(key_step, mean.shape)  # ~ N(mean, std)
+            log_prob = net.gaussian_log_prob(action, mean, log_std)
+            env_state = env.step(env_state, action)
+            done = env_state.done.astype(bool)
+            reward = env_state.reward.astype(jp.float32)
+            ep_return = ep_return + reward
+            ep_length = ep_length + 1.0
+            tr = Transition(
+                obs=obs, resets=prev_done, actions=action, log_probs=log_prob, means=mean,
+                values=value, rewards=reward, dones=done.astype(jp.float32),
+                truncation=env_state.info["truncation"].astype(jp.float32),
+                finished_return=jp.where(done, ep_return, 0.0),
+                finished_length=jp.where(done, ep_length, 0.0),
+                metrics={k: v.astype(jp.float32) for k, v in env_state.metrics.items()},
+            )  # fmt: skip
+            ep_return = jp.where(done, 0.0, ep_return)
+            ep_length = jp.where(done, 0.0, ep_length)
+            return (env_state, net_carry, done, ep_return, ep_length), tr
+
+        carry0 = (state.env_state, state.carry, state.prev_done, state.ep_return, state.ep_length)
+        carry, traj = jax.lax.scan(step, carry0, jax.random.split(key, num_steps))
+        env_state, net_carry, prev_done, _, _ = carry
+        _, _, _, last_value = networks.step(
+            params, normalizer, net_carry, env_state.obs, prev_done
+        )
+        return carry, traj, last_value
+
+    # ------------------------------------------------------------ update
+    def _sgd_step(carry, mb: losses.Minibatch):
+        params, opt_state, normalizer = carry
+        grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
+        (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
+        grads = jax.lax.pmean(grads, AXIS)
+        metrics = jax.lax.pmean(metrics, AXIS)
+        if adaptive:
+            lr = adapt_learning_rate(
+                opt_state.hyperparams["learning_rate"], metrics["ppo/kl"], desired_kl, lr_min, lr_max
+            )
+            opt_state = _set_learning_rate(opt_state, lr)
+        updates, opt_state = optimizer.update(grads, opt_state, params)
+        params = optax.apply_updates(params, updates)
+        metrics["ppo/grad_norm"] = optax.global_norm(grads)
+        return (params, opt_state, normalizer), metrics
+
+    def _iteration_local(state: TrainState):
+        key, key_rollout, key_update = jax.random.split(state.key, 3)
+        # Each device gets its own rollout/shuffle stream; the state key stays replicated.
+        shard = jax.lax.axis_index(AXIS)
+        key_rollout = jax.random.fold_in(key_rollout, shard)
+        key_update = jax.random.fold_in(key_update, shard)
+        carry_start = state.carry  # stored initial carry of this rollout (before any reset)
+        (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = _rollout(
+            state, key_rollout
+        )
+
+        rewards = losses.bootstrap_truncation(traj.rewards, traj.values, traj.truncation, gamma)
+        advantages, returns = losses.compute_gae(
+            rewards, traj.values, traj.dones, last_value, gamma, lam
+        )
+        if normalize_advantage:
+            mean = jax.lax.pmean(jp.mean(advantages), AXIS)
+            var = jax.lax.pmean(jp.mean((advantages - mean) ** 2), AXIS)
+            advantages = (advantages - mean) / (jp.sqrt(var) + 1e-8)
+
+        data = losses.Minibatch(
+            carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
+            log_probs=traj.log_probs, means=traj.means, log_std=state.params["params"]["log_std"],
+            values=traj.values, advantages=advantages, returns=returns,
+        )  # fmt: skip
+        n_local = traj.rewards.shape[1]
+        mb_size = n_local // num_minibatches
+
+        def _epoch(carry, key_epoch):
+            perm = jax.random.permutation(key_epoch, n_local)  # shuffle envs, keep time order
+            idx = perm.reshape(num_minibatches, mb_size)
+
+            def take(i):
+                return losses.Minibatch(
+                    carry=jax.tree.map(lambda x: x[i], data.carry),
+                    obs=jax.tree.map(lambda x: x[:, i], data.obs),
+                    resets=data.resets[:, i], actions=data.actions[:, i],
+                    log_probs=data.log_probs[:, i], means=data.means[:, i], log_std=data.log_std,
+                    values=data.values[:, i], advantages=data.advantages[:, i],
+                    returns=data.returns[:, i],
+                )  # fmt: skip
+
+            minibatches = jax.vmap(take)(idx)  # leading minibatch axis
+            minibatches = minibatches._replace(
+                log_std=jp.broadcast_to(data.log_std, (num_minibatches,) + data.log_std.shape)
+            )
+            return jax.lax.scan(_sgd_step, carry, minibatches)
+
+        (params, opt_state, _), sgd_metrics = jax.lax.scan(
+            _epoch,
+            (state.params, state.opt_state, state.normalizer),
+            jax.random.split(key_update, num_epochs),
+        )
+        normalizer = state.normalizer
+        if networks.normalize_observations:  # after the update: the loss used the rollout's stats
+            normalizer = running_statistics.update(
+                normalizer, net.select_obs(traj.obs), pmap_axis_name=AXIS
+            )
+
+        metrics = _iteration_metrics(traj, sgd_metrics, params, opt_state)
+        new_state = TrainState(
+            params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
+            carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
+            key=key, iteration=state.iteration + 1,
+        )  # fmt: skip
+        return new_state, metrics
+
+    iteration_sharded = jax.shard_map(
+        _iteration_local,
+        mesh=mesh,
+        in_specs=(state_spec,),
+        out_specs=(state_spec, P()),
+        check_vma=False,
+    )
+    iteration = jax.jit(
+        iteration_sharded,
+        in_shardings=(state_sharding,),
+        out_shardings=(state_sharding, NamedSharding(mesh, P())),
+        donate_argnums=0,
+    )
+    return Train(
+        init=init,
+        iteration=iteration,
+        networks=networks,
+        mesh=mesh,
+        state_sharding=state_sharding,
+        num_envs=num_envs,
+        steps_per_iteration=num_envs * num_steps,
+    )
+
+
+def _iteration_metrics(traj: Transition, sgd_metrics: dict, params, opt_state) -> dict:
+    """Scalar metrics of one iteration, reduced over all devices.
+
+    'train/episode_return', 'train/episode_length': means over episodes finished in the rollout
+    (NaN if none finished); 'train/episodes': their count; 'train/reward': mean reward per step;
+    env metrics under their own names ('episode/*' averaged over done steps, others over all
+    steps); 'loss/*', 'ppo/kl', 'ppo/clip_fraction', 'ppo/grad_norm' averaged over minibatches;
+    'ppo/learning_rate' after the update; 'ppo/action_std' mean std; 'ppo/params_finite' 1 or 0.
+    """
+    psum = lambda x: jax.lax.psum(x, AXIS)
+    n_done = psum(jp.sum(traj.dones))
+    n_steps = psum(jp.asarray(traj.dones.size, jp.float32))
+    per_episode = lambda x: jp.where(n_done > 0, psum(jp.sum(x)) / jp.maximum(n_done, 1.0), jp.nan)
+    m = {
+        "train/episode_return": per_episode(traj.finished_return),
+        "train/episode_length": per_episode(traj.finished_length),
+        "train/episodes": n_done,
+        "train/reward": psum(jp.sum(traj.rewards)) / n_steps,
+    }
+    for k, v in traj.metrics.items():
+        if k.startswith(EPISODE_PREFIX):
+            m[k] = per_episode(v * traj.dones)
+        else:
+            m[k] = psum(jp.sum(v)) / n_steps
+    m.update(jax.tree.map(jp.mean, sgd_metrics))
+    m["ppo/learning_rate"] = opt_state.hyperparams["learning_rate"]
+    m["ppo/action_std"] = jp.mean(jp.exp(params["params"]["log_std"]))
+    finite = [jp.all(jp.isfinite(x)) for x in jax.tree.leaves(params)]
+    m["ppo/params_finite"] = jp.all(jp.stack(finite)).astype(jp.float32)
+    return {k: jp.asarray(v, jp.float32) for k, v in m.items()}
+
+
+def env_steps(iteration: int, train: Train) -> int:
+    """Env steps done after `iteration` iterations."""
+    return int(iteration) * train.steps_per_iteration
+
+
+def num_params(params) -> int:
+    return int(sum(math.prod(x.shape) for x in jax.tree.leaves(params)))
+
+
+__all__ = [
+    "Train",
+    "TrainState",
+    "Transition",
+    "VmapEnv",
+    "adapt_learning_rate",
+    "env_steps",
+    "make_train",
+    "wrap_brax_env",
+]

@@ -1,0 +1,98 @@
+"""Joint PD law with drive torque limits, and the control step (PD + physics substeps) in MJX."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+from mujoco import mjx
+
+from foottof import constants
+
+
+def torque_bounds(
+    qd: jax.Array,
+    torque_limit: float = constants.TORQUE_LIMIT_NM,
+    velocity_limit: float = constants.VELOCITY_LIMIT_RADS,
+    saturation_torque: float | None = 1.5 * constants.TORQUE_LIMIT_NM,
+) -> tuple[jax.Array, jax.Array]:
+    """Lower and upper joint-torque bounds [N m] at joint speed ``qd`` [rad/s].
+
+    DC-motor model (IsaacLab ``DCMotor``, anymal.md §7): ``upper = clip(sat * (1 - qd / v_lim),
+    0, tau_lim)``, ``lower = clip(sat * (-1 - qd / v_lim), -tau_lim, 0)``. The full ``tau_lim``
+    is available while ``|qd| <= v_lim * (1 - tau_lim / sat)`` (2.83 rad/s for 80 / 120 / 8.5);
+    the torque that drives the joint further in its direction of motion falls linearly to 0 at
+    ``v_lim``, while braking torque stays available. With ``saturation_torque=None`` the bounds
+    are the constant +-``torque_limit`` (no speed dependence; ``velocity_limit`` unused).
+    """
+    if saturation_torque is None:
+        lim = jp.full_like(qd, torque_limit)
+        return -lim, lim
+    upper = jp.clip(saturation_torque * (1.0 - qd / velocity_limit), 0.0, torque_limit)
+    lower = jp.clip(saturation_torque * (-1.0 - qd / velocity_limit), -torque_limit, 0.0)
+    return lower, upper
+
+
+def pd_torque(
+    q_target: jax.Array,
+    q: jax.Array,
+    qd: jax.Array,
+    kp: jax.Array | float,
+    kd: jax.Array | float,
+    torque_limit: float = constants.TORQUE_LIMIT_NM,
+    velocity_limit: float = constants.VELOCITY_LIMIT_RADS,
+    saturation_torque: float | None = 1.5 * constants.TORQUE_LIMIT_NM,
+) -> jax.Array:
+    """Joint PD torque ``kp (q_target - q) - kd qd`` clipped to the drive limits.
+
+    Args:
+      q_target: (..., 12) joint position targets [rad].
+      q: (..., 12) joint positions [rad].
+      qd: (..., 12) joint velocities [rad/s].
+      kp: stiffness [N m/rad], scalar or broadcastable to (..., 12).
+      kd: damping [N m s/rad], scalar or broadcastable to (..., 12).
+      torque_limit: continuous torque limit [N m].
+      velocity_limit: speed at which no torque is left in the direction of motion [rad/s].
+      saturation_torque: peak torque of the DC-motor line [N m]; None = constant clip only
+        (see :func:`torque_bounds`).
+
+    Returns:
+      (..., 12) joint torques [N m].
+    """
+    tau = kp * (q_target - q) - kd * qd
+    lower, upper = torque_bounds(qd, torque_limit, velocity_limit, saturation_torque)
+    return jp.clip(tau, lower, upper)
+
+
+def control_step(
+    m: mjx.Model,
+    d: mjx.Data,
+    q_target: jax.Array,
+    kp: jax.Array | float,
+    kd: jax.Array | float,
+    num_substeps: int = constants.DECIMATION,
+    torque_limit: float = constants.TORQUE_LIMIT_NM,
+    velocity_limit: float = constants.VELOCITY_LIMIT_RADS,
+    saturation_torque: float | None = 1.5 * constants.TORQUE_LIMIT_NM,
+) -> tuple[mjx.Data, jax.Array]:
+    """Hold ``q_target`` for one control period: PD in JAX, then ``mjx.step``, ``num_substeps`` times.
+
+    Args:
+      m: MJX model (joint order of foottof.robot.make_model: qpos[7:19], qvel[6:18]).
+      d: MJX data (unbatched; vmap for many envs).
+      q_target: (12,) joint targets [rad], held over the substeps.
+      kp, kd, torque_limit, velocity_limit, saturation_torque: see :func:`pd_torque`.
+      num_substeps: physics steps per control step (static).
+
+    Returns:
+      (new data, (num_substeps, 12) torques applied at each substep [N m]).
+    """
+
+    def substep(d, _):
+        tau = pd_torque(
+            q_target, d.qpos[7:19], d.qvel[6:18], kp, kd, torque_limit, velocity_limit,
+            saturation_torque,
+        )
+        d = mjx.step(m, d.replace(ctrl=tau))
+        return d, tau
+
+    return jax.lax.scan(substep, d, None, length=num_substeps)

@@ -1,0 +1,99 @@
+"""Terrain curriculum: pure level updates from episode outcomes (jit/vmap-able, explicit keys)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+
+
+def _check_levels(num_levels: int) -> None:
+    if int(num_levels) != num_levels or num_levels < 1:
+        raise ValueError(f"num_levels={num_levels!r} must be an integer >= 1")
+
+
+def initial_levels(
+    key: jax.Array, num_envs: int, num_levels: int, init_level_max: int
+) -> jax.Array:
+    """Initial curriculum level of each env.
+
+    Args:
+      key: PRNG key.
+      num_envs: number of envs (static).
+      num_levels: number of levels of the map (static).
+      init_level_max: largest initial level, in [0, num_levels - 1] (static).
+
+    Returns:
+      (num_envs,) int32 levels, level ~ U{0, ..., init_level_max}.
+    """
+    _check_levels(num_levels)
+    if not 0 <= init_level_max <= num_levels - 1:
+        raise ValueError(
+            f"init_level_max={init_level_max!r} outside the valid range [0, {num_levels - 1}]"
+        )
+    return jax.random.randint(key, (num_envs,), 0, init_level_max + 1, dtype=jp.int32)
+
+
+def initial_columns(num_envs: int, num_cols: int) -> jax.Array:
+    """Column (terrain type slot) of each env: env i -> i mod num_cols, spreading envs evenly.
+
+    Returns:
+      (num_envs,) int32 columns.
+    """
+    if int(num_cols) != num_cols or num_cols < 1:
+        raise ValueError(f"num_cols={num_cols!r} must be an integer >= 1")
+    return jp.arange(num_envs, dtype=jp.int32) % num_cols
+
+
+def progress_fraction(spawn_xy: jax.Array, goal_xy: jax.Array, xy: jax.Array) -> jax.Array:
+    """Fraction of the spawn-to-goal distance covered: ``(|g - s| - |g - p|) / |g - s|``.
+
+    Args:
+      spawn_xy, goal_xy, xy: (..., 2) world x, y at spawn, of the goal, and now [m].
+
+    Returns:
+      (...) progress: 1 at the goal, 0 at the spawn distance, negative when farther than at spawn.
+    """
+    d0 = jp.linalg.norm(goal_xy - spawn_xy, axis=-1)
+    d = jp.linalg.norm(goal_xy - xy, axis=-1)
+    return (d0 - d) / jp.maximum(d0, 1e-6)
+
+
+def update_levels(
+    key: jax.Array,
+    level: jax.Array,
+    done: jax.Array,
+    reached_goal: jax.Array,
+    progress: jax.Array,
+    num_levels: int,
+    down_progress_frac: float = 0.5,
+) -> jax.Array:
+    """New curriculum levels of envs whose episode ended (others keep theirs).
+
+    An env that reached its goal moves up one level; one that solved the top level goes to a random
+    level ~ U{0, ..., num_levels - 1}; one that did not reach the goal and covered less than
+    ``down_progress_frac`` of the distance moves down one level (not below 0); any other stays.
+
+    Args:
+      key: PRNG key (for the random level after solving the top level).
+      level: (N,) int current levels in [0, num_levels - 1].
+      done: (N,) bool, the episode ended (only these envs change level).
+      reached_goal: (N,) bool, the env reached its goal.
+      progress: (N,) fraction of the goal distance covered (see :func:`progress_fraction`).
+      num_levels: number of levels (static).
+      down_progress_frac: threshold on ``progress`` to move down (static), in [0, 1].
+
+    Returns:
+      (N,) int32 new levels.
+    """
+    _check_levels(num_levels)
+    if not 0.0 <= down_progress_frac <= 1.0:
+        raise ValueError(
+            f"down_progress_frac={down_progress_frac!r} outside the valid range [0, 1]"
+        )
+    level = jp.asarray(level, jp.int32)
+    up = reached_goal
+    down = ~reached_goal & (progress < down_progress_frac)
+    new = level + up.astype(jp.int32) - down.astype(jp.int32)
+    random_level = jax.random.randint(key, level.shape, 0, num_levels, dtype=jp.int32)
+    new = jp.where(new >= num_levels, random_level, jp.maximum(new, 0))
+    return jp.where(done, new, level)

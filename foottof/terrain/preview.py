@@ -1,0 +1,101 @@
+"""Shaded-relief PNG of every terrain type at a few difficulties (`python -m ... --out x.png`)."""
+
+from __future__ import annotations
+
+import argparse
+import pathlib
+
+import jax
+import jax.numpy as jp
+import numpy as np
+
+from foottof.terrain.tiles import TERRAIN_TYPES, TileSpec, generate_tile
+
+
+def render_grid(
+    out: str | pathlib.Path,
+    difficulties: tuple[float, ...] = (0.0, 0.5, 1.0),
+    seed: int = 0,
+    spec: TileSpec | None = None,
+) -> pathlib.Path:
+    """Writes a PNG grid: one row per terrain type, one column per difficulty.
+
+    Args:
+      out: output PNG path (parent folders are created).
+      difficulties: generator difficulties in [0, 1], one column each.
+      seed: PRNG seed of the tiles.
+      spec: tile geometry; ``TileSpec()`` if None.
+
+    Returns:
+      The path written.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.colors import LightSource
+
+    spec = TileSpec() if spec is None else spec
+    out = pathlib.Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    d = jp.asarray(difficulties, jp.float32)
+    keys = jax.random.split(jax.random.key(seed), len(difficulties))
+    ls = LightSource(azdeg=315, altdeg=45)
+    cmap = plt.get_cmap("gist_earth")
+    extent = (0.0, spec.length_m, 0.0, spec.width_m)
+    nrow, ncol = len(TERRAIN_TYPES), len(difficulties)
+    fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 2.55 * nrow), squeeze=False)
+    lo, hi = spec.pit_z_m, 0.7
+    for r, name in enumerate(TERRAIN_TYPES):
+        gen = jax.jit(jax.vmap(lambda k, dd, name=name: generate_tile(name, k, dd, spec)))
+        tiles = np.asarray(gen(keys, d))
+        for c in range(ncol):
+            z = tiles[c]
+            rgb = ls.shade(
+                np.clip(z, lo, hi),
+                cmap=cmap,
+                vert_exag=4.0,
+                dx=spec.cell_m,
+                dy=spec.cell_m,
+                blend_mode="soft",
+                vmin=lo,
+                vmax=hi,
+            )
+            ax = axes[r, c]
+            ax.imshow(rgb, origin="lower", extent=extent, interpolation="nearest")
+            ax.set_title(
+                f"{name}  d={difficulties[c]:.1f}  z[{z.min():.2f}, {z.max():.2f}] m", fontsize=8
+            )
+            ax.axvline(spec.course_x0_m, color="w", lw=0.6, ls="--")
+            ax.axvline(spec.course_x1_m, color="w", lw=0.6, ls="--")
+            ax.tick_params(labelsize=6)
+            if c == 0:
+                ax.set_ylabel("y [m]", fontsize=7)
+            if r == nrow - 1:
+                ax.set_xlabel("x [m] (walking direction)", fontsize=7)
+    fig.suptitle(
+        "foottof training terrains: rows = type, columns = difficulty "
+        f"(start platform x < {spec.course_x0_m:.2f} m, goal x >= {spec.course_x1_m:.2f} m, "
+        f"pit z = {spec.pit_z_m:.1f} m)",
+        fontsize=10,
+    )
+    fig.tight_layout(rect=(0, 0, 1, 0.985))
+    fig.savefig(out, dpi=110)
+    plt.close(fig)
+    return out
+
+
+def main(argv: list[str] | None = None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__)
+    parser.add_argument("--out", default="docs/terrains.png", help="output PNG path")
+    parser.add_argument("--seed", type=int, default=0, help="PRNG seed")
+    parser.add_argument(
+        "--difficulties", type=float, nargs="+", default=[0.0, 0.5, 1.0], help="in [0, 1]"
+    )
+    args = parser.parse_args(argv)
+    path = render_grid(args.out, tuple(args.difficulties), args.seed)
+    print(f"wrote {path}")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,439 @@
+"""Pure-JAX generators of the nine training terrain tiles (heights in metres, static shapes)."""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Callable
+
+import jax
+import jax.numpy as jp
+import numpy as np
+
+# The paper's nine types, in order: stage 1 (first five), then the four stage-2 additions.
+TERRAIN_TYPES = (
+    "grid_stones",
+    "two_row_stones",
+    "rough_boxes",
+    "platform_gap",
+    "mixed_row_stones",
+    "beam",
+    "stairs",
+    "pyramid_up",
+    "pyramid_down",
+)
+STAGE1_TYPES = TERRAIN_TYPES[:5]
+STONE_TYPES = ("grid_stones", "two_row_stones", "mixed_row_stones")  # stepping-stone types
+PIT_TYPES = ("grid_stones", "two_row_stones", "platform_gap", "mixed_row_stones", "beam")
+
+# Spawn surface height per type: every start platform (and goal region) is flat at z = 0 [m], so
+# the spawn surface is 0 for all nine types; the env adds its base height on top.
+SPAWN_SURFACE_Z_M = {name: 0.0 for name in TERRAIN_TYPES}
+
+TWO_ROW_HALF_SPACING_M = 0.30  # row centres at y = centre +- this; ANYmal-D feet are at +-0.31 m
+STAIRS_MAX_RISE_M = 0.8  # total rise (or drop) of a stairs tile is capped at this [m]
+PYRAMID_MAX_HEIGHT_M = 0.6  # pyramids are truncated (flat top / bottom) at this height [m]
+
+
+@dataclasses.dataclass(frozen=True)
+class TileSpec:
+    """Static geometry of one tile (hashable, usable as a jit static argument).
+
+    The tile's local vertex (i, j) sits at x = j * cell_m, y = i * cell_m (Heightfield layout: rows
+    along +y, columns along +x). The robot walks along +x from the start platform (columns
+    ``j < n_start``) to the goal region (columns ``j >= nx - n_goal``), both flat at z = 0; the
+    course in between holds the terrain, with a pit at ``pit_z_m`` under stones and beams.
+
+    Attributes:
+      length_m: extent along +x [m]; ``nx = length_m / cell_m`` vertex columns.
+      width_m: extent along +y [m]; ``ny = width_m / cell_m`` vertex rows.
+      cell_m: vertex spacing [m], at most 0.04.
+      platform_length_m: start platform length along x [m].
+      goal_length_m: goal region length along x [m].
+      pit_z_m: pit floor z [m]; also the Heightfield floor (elevation 0).
+      z_range_m: heights are clipped to [pit_z_m, pit_z_m + z_range_m] [m].
+    """
+
+    length_m: float = 6.0
+    width_m: float = 4.0
+    cell_m: float = 0.04
+    platform_length_m: float = 1.6
+    goal_length_m: float = 1.0
+    pit_z_m: float = -1.0
+    z_range_m: float = 2.0
+
+    def __post_init__(self):
+        if not 0.0 < self.cell_m <= 0.04:
+            raise ValueError(f"cell_m={self.cell_m} must be in (0, 0.04] m")
+        for name in ("length_m", "width_m", "platform_length_m", "goal_length_m"):
+            value = getattr(self, name)
+            n = value / self.cell_m
+            if value <= 0 or abs(n - round(n)) > 1e-6:
+                raise ValueError(
+                    f"{name}={value} must be a positive multiple of cell_m={self.cell_m}"
+                )
+        if self.platform_length_m + self.goal_length_m > self.length_m - 1.0:
+            raise ValueError(
+                f"platform_length_m + goal_length_m = "
+                f"{self.platform_length_m + self.goal_length_m} must leave >= 1 m of course in "
+                f"length_m={self.length_m}"
+            )
+        if self.pit_z_m > -0.5 or self.pit_z_m + self.z_range_m < 1.0:
+            raise ValueError(
+                f"pit_z_m={self.pit_z_m}, z_range_m={self.z_range_m}: need pit_z_m <= -0.5 and "
+                "pit_z_m + z_range_m >= 1.0 m to hold every terrain type"
+            )
+
+    @property
+    def nx(self) -> int:
+        return round(self.length_m / self.cell_m)
+
+    @property
+    def ny(self) -> int:
+        return round(self.width_m / self.cell_m)
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(ny, nx): vertex rows (along +y) and columns (along +x)."""
+        return (self.ny, self.nx)
+
+    @property
+    def n_start(self) -> int:
+        """Number of start-platform vertex columns."""
+        return round(self.platform_length_m / self.cell_m)
+
+    @property
+    def n_goal(self) -> int:
+        """Number of goal-region vertex columns."""
+        return round(self.goal_length_m / self.cell_m)
+
+    @property
+    def course_x0_m(self) -> float:
+        """Local x of the first course vertex (the start platform ends one cell before) [m]."""
+        return self.n_start * self.cell_m
+
+    @property
+    def course_x1_m(self) -> float:
+        """Local x of the first goal-region vertex [m]."""
+        return (self.nx - self.n_goal) * self.cell_m
+
+    @property
+    def spawn_xy_m(self) -> tuple[float, float]:
+        """Local (x, y) of the start-platform centre on the tile centre line [m]."""
+        return ((self.n_start - 1) * self.cell_m / 2.0, (self.ny - 1) * self.cell_m / 2.0)
+
+    @property
+    def goal_xy_m(self) -> tuple[float, float]:
+        """Local (x, y) of the goal-region centre on the tile centre line [m]."""
+        x = (self.nx - self.n_goal + self.nx - 1) * self.cell_m / 2.0
+        return (x, (self.ny - 1) * self.cell_m / 2.0)
+
+    @classmethod
+    def from_config(cls, cfg) -> TileSpec:
+        """Builds the spec from the ``c.terrain`` config section."""
+        return cls(
+            length_m=float(cfg.tile_length_m),
+            width_m=float(cfg.tile_width_m),
+            cell_m=float(cfg.cell_m),
+            platform_length_m=float(cfg.platform_length_m),
+            goal_length_m=float(cfg.goal_length_m),
+            pit_z_m=float(cfg.pit_z_m),
+            z_range_m=float(cfg.z_range_m),
+        )
+
+
+# ----------------------------------------------------------------------------------------------
+# Helpers.
+
+
+def _lerp(easy: float, hard: float, d: jax.Array) -> jax.Array:
+    return easy + (hard - easy) * d
+
+
+def _grid(spec: TileSpec) -> tuple[jax.Array, jax.Array]:
+    """(ny, nx) local x and y of every vertex [m]."""
+    x = jp.arange(spec.nx, dtype=jp.float32) * spec.cell_m
+    y = jp.arange(spec.ny, dtype=jp.float32) * spec.cell_m
+    return jp.meshgrid(x, y)  # xy indexing: (ny, nx)
+
+
+def _n_max(extent_m: float, min_pitch_m: float) -> int:
+    """Static bound on the count of cells of pitch >= min_pitch_m over extent_m (+ margin)."""
+    return int(math.ceil(extent_m / min_pitch_m)) + 3
+
+
+def _cell(u: jax.Array, pitch: jax.Array, n: int) -> tuple[jax.Array, jax.Array]:
+    """Periodic cells along u: (table index in [0, n), position inside the cell in [0, pitch)).
+
+    Cell k covers [k * pitch, (k + 1) * pitch); index k + 1 is used so cell -1 has an entry too.
+    """
+    k = jp.floor(u / pitch)
+    local = u - k * pitch
+    return jp.clip(k.astype(jp.int32) + 1, 0, n - 1), local
+
+
+def _segments(u: jax.Array, gaps: jax.Array, lengths: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Alternating (gap k, solid k) segments laid from u = 0: (segment index, u is in a gap).
+
+    Args:
+      u: (...) position along the course [m].
+      gaps: (n,) gap lengths [m]; gap k precedes solid k.
+      lengths: (n,) solid lengths [m].
+    """
+    pitch = gaps + lengths
+    starts = jp.concatenate([jp.zeros((1,), pitch.dtype), jp.cumsum(pitch)[:-1]])
+    k = jp.clip(jp.searchsorted(starts, u, side="right") - 1, 0, gaps.shape[0] - 1)
+    in_gap = (u - starts[k]) < gaps[k]
+    return k, in_gap
+
+
+def _finish(z: jax.Array, spec: TileSpec, pit_in_course: jax.Array | None = None) -> jax.Array:
+    """Sets the start platform and goal region to z = 0 and clips to the representable range."""
+    col = jp.arange(spec.nx)[None, :]
+    course = (col >= spec.n_start) & (col < spec.nx - spec.n_goal)
+    if pit_in_course is not None:
+        z = jp.where(pit_in_course, spec.pit_z_m, z)
+    z = jp.where(course, z, 0.0)
+    return jp.clip(z, spec.pit_z_m, spec.pit_z_m + spec.z_range_m).astype(jp.float32)
+
+
+# ----------------------------------------------------------------------------------------------
+# Generators: (key, difficulty in [0, 1], spec) -> (ny, nx) heights [m]. Easy -> hard values are
+# interpolated linearly in the difficulty d; "size" is the top extent of a stone before the cell
+# quantization (the flat top spans the vertices inside it).
+
+
+def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """Dense regular grid of square stones over the pit, jittered, with random top heights."""
+    size = _lerp(0.60, 0.18, d)  # nominal stone top size [m]
+    gap = _lerp(0.05, 0.35, d)  # nominal gap between stones [m]
+    dz = _lerp(0.0, 0.20, d)  # peak-to-peak spread of the top heights [m]
+    pitch = size + gap
+    x, y = _grid(spec)
+    nkx = _n_max(spec.course_x1_m - spec.course_x0_m, 0.53)
+    nky = _n_max(spec.width_m, 0.53)
+    k_z, k_jx, k_jy, k_fx, k_fy, k_ph = jax.random.split(key, 6)
+    top = jax.random.uniform(k_z, (nky, nkx), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
+    jx = jax.random.uniform(k_jx, (nky, nkx), minval=-0.25, maxval=0.25) * gap  # centre jitter
+    jy = jax.random.uniform(k_jy, (nky, nkx), minval=-0.25, maxval=0.25) * gap
+    fx = jax.random.uniform(k_fx, (nky, nkx), minval=0.9, maxval=1.0)  # size factor ~ U(0.9, 1)
+    fy = jax.random.uniform(k_fy, (nky, nkx), minval=0.9, maxval=1.0)
+    phase_y = jax.random.uniform(k_ph, (), maxval=1.0) * pitch  # grid phase across y
+    kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
+    ky, ly = _cell(y - phase_y, pitch, nky)
+    inside = (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2) & (
+        jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2
+    )
+    return _finish(top[ky, kx], spec, pit_in_course=~inside)
+
+
+def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """Two rows of square stones along x (left and right feet), independently staggered."""
+    size = _lerp(0.60, 0.18, d)  # nominal stone top size [m]
+    gap = _lerp(0.05, 0.45, d)  # nominal gap between stones of a row [m]
+    dz = _lerp(0.0, 0.15, d)  # peak-to-peak spread of the top heights [m]
+    lateral = _lerp(0.0, 0.05, d)  # lateral jitter of each stone, +- [m]
+    pitch = size + gap
+    x, y = _grid(spec)
+    n = _n_max(spec.course_x1_m - spec.course_x0_m, 0.63)
+    y_mid = (spec.ny - 1) * spec.cell_m / 2
+    inside = jp.zeros(x.shape, bool)
+    z = jp.zeros(x.shape, jp.float32)
+    for side, k_row in zip((-1.0, 1.0), jax.random.split(key, 2), strict=True):
+        k_z, k_jx, k_jy, k_f, k_ph = jax.random.split(k_row, 5)
+        top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
+        jx = jax.random.uniform(k_jx, (n,), minval=-0.2, maxval=0.2) * gap
+        jy = jax.random.uniform(k_jy, (n,), minval=-1.0, maxval=1.0) * lateral
+        f = jax.random.uniform(k_f, (n,), minval=0.9, maxval=1.0)  # size factor ~ U(0.9, 1)
+        phase = jax.random.uniform(k_ph, (), maxval=0.5) * pitch  # row stagger ~ U(0, pitch/2)
+        k, lx = _cell(x - spec.course_x0_m - gap / 2 - phase, pitch, n)
+        yc = y_mid + side * TWO_ROW_HALF_SPACING_M + jy[k]
+        row = (jp.abs(lx - pitch / 2 - jx[k]) <= size * f[k] / 2) & (
+            jp.abs(y - yc) <= size * f[k] / 2
+        )
+        z = jp.where(row & ~inside, top[k], z)
+        inside = inside | row
+    return _finish(z, spec, pit_in_course=~inside)
+
+
+def _rough_boxes(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """Gap-free field of square boxes with random heights (no pit)."""
+    size = _lerp(0.50, 0.25, d)  # box size [m]
+    dz = _lerp(0.04, 0.30, d)  # peak-to-peak spread of the box heights [m]
+    x, y = _grid(spec)
+    nkx = _n_max(spec.course_x1_m - spec.course_x0_m, 0.25)
+    nky = _n_max(spec.width_m, 0.25)
+    k_z, k_ph = jax.random.split(key)
+    top = jax.random.uniform(k_z, (nky, nkx), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
+    phase = jax.random.uniform(k_ph, (2,), maxval=1.0) * size  # grid phase in x, y
+    kx, _ = _cell(x - spec.course_x0_m - phase[0], size, nkx)
+    ky, _ = _cell(y - phase[1], size, nky)
+    return _finish(top[ky, kx], spec)
+
+
+def _platform_gap(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """Full-width platforms separated by gaps over the pit."""
+    gap = _lerp(0.05, 0.75, d)  # largest gap width; each gap ~ U(0.85, 1) * gap [m]
+    len_lo = _lerp(1.0, 0.6, d)  # platform length ~ U(len_lo, len_hi) [m]
+    len_hi = _lerp(1.6, 1.0, d)
+    dz = _lerp(0.0, 0.20, d)  # peak-to-peak spread of the platform heights [m]
+    x, _ = _grid(spec)
+    n = _n_max(spec.course_x1_m - spec.course_x0_m, 1.0)
+    k_g, k_l, k_z = jax.random.split(key, 3)
+    gaps = gap * jax.random.uniform(k_g, (n,), minval=0.85, maxval=1.0)
+    lengths = jax.random.uniform(k_l, (n,), minval=len_lo, maxval=len_hi)
+    top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
+    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths)
+    return _finish(top[k], spec, pit_in_course=in_gap)
+
+
+def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """Rows of stones across y, each row randomly shifted; mixed sizes, bricks and high stones."""
+    size = _lerp(0.50, 0.18, d)  # largest stone top size; each ~ U(0.75, 1) * size [m]
+    gap = _lerp(0.05, 0.40, d)  # nominal gap between stones, along x and y [m]
+    dz = _lerp(0.0, 0.20, d)  # low bricks sit dz lower, high stones dz higher [m]
+    keep = _lerp(1.0, 0.85, d)  # probability that a stone is present [-]
+    pitch = size + gap
+    x, y = _grid(spec)
+    nkx = _n_max(spec.course_x1_m - spec.course_x0_m, 0.55)
+    nky = _n_max(spec.width_m, 0.55) + 1
+    k_kind, k_z, k_jx, k_jy, k_fx, k_fy, k_ph, k_keep = jax.random.split(key, 8)
+    # kind ~ {regular 0.6, low brick 0.25, high stone 0.15}; regular tops ~ U(+-0.1 dz).
+    kind = jax.random.choice(k_kind, 3, (nky, nkx), p=jp.array([0.6, 0.25, 0.15]))
+    regular = jax.random.uniform(k_z, (nky, nkx), minval=-0.1, maxval=0.1) * dz
+    top = jp.where(kind == 1, -dz, jp.where(kind == 2, dz, regular))
+    jx = jax.random.uniform(k_jx, (nky, nkx), minval=-0.25, maxval=0.25) * gap
+    jy = jax.random.uniform(k_jy, (nky, nkx), minval=-0.25, maxval=0.25) * gap
+    fx = jax.random.uniform(k_fx, (nky, nkx), minval=0.75, maxval=1.0)
+    fy = jax.random.uniform(k_fy, (nky, nkx), minval=0.75, maxval=1.0)
+    present = jax.random.uniform(k_keep, (nky, nkx)) < keep
+    phase_y = jax.random.uniform(k_ph, (nkx,), maxval=1.0) * pitch  # per-row shift across y
+    kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
+    ky, ly = _cell(y - phase_y[kx], pitch, nky)
+    inside = (
+        present[ky, kx]
+        & (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2)
+        & (jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2)
+    )
+    return _finish(top[ky, kx], spec, pit_in_course=~inside)
+
+
+def _beam(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """A beam along x over the pit, made of segments with small offsets and gaps."""
+    width = _lerp(0.80, 0.16, d)  # beam top width [m]
+    offset = _lerp(0.0, 0.06, d)  # lateral offset of each segment, +- [m]
+    dz = _lerp(0.0, 0.08, d)  # peak-to-peak spread of the segment heights [m]
+    gap = _lerp(0.0, 0.15, d)  # largest gap between segments; each ~ U(0.5, 1) * gap [m]
+    x, y = _grid(spec)
+    n = _n_max(spec.course_x1_m - spec.course_x0_m, 0.8)
+    k_g, k_l, k_z, k_y = jax.random.split(key, 4)
+    gaps = gap * jax.random.uniform(k_g, (n,), minval=0.5, maxval=1.0)
+    gaps = gaps.at[0].set(0.0)  # the beam starts at the platform edge
+    lengths = jax.random.uniform(k_l, (n,), minval=0.8, maxval=1.6)  # segment length [m]
+    top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
+    yc = (spec.ny - 1) * spec.cell_m / 2 + jax.random.uniform(k_y, (n,), minval=-1.0) * offset
+    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths)
+    on_beam = ~in_gap & (jp.abs(y - yc[k]) <= width / 2)
+    return _finish(top[k], spec, pit_in_course=~on_beam)
+
+
+def _stairs(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
+    """Full-width stairs up to a landing and back down (or down and back up), mirrored."""
+    rise = _lerp(0.05, 0.25, d)  # nominal step rise; each ~ U(0.85, 1.15) * rise [m]
+    tread = _lerp(0.45, 0.28, d)  # nominal tread depth; each ~ U(0.9, 1.1) * tread [m]
+    x, _ = _grid(spec)
+    x_first, x_last = spec.course_x0_m, spec.course_x1_m - spec.cell_m
+    half_run = (x_last - x_first) / 2
+    n = _n_max(half_run, 0.25)
+    k_r, k_t, k_s = jax.random.split(key, 3)
+    rises = rise * jax.random.uniform(k_r, (n,), minval=0.85, maxval=1.15)
+    treads = tread * jax.random.uniform(k_t, (n,), minval=0.9, maxval=1.1)
+    riser_at = jp.cumsum(treads)  # distance of riser k from the course end [m]
+    valid = (riser_at <= half_run - 0.3) & (jp.cumsum(rises) <= STAIRS_MAX_RISE_M)
+    dist = half_run - jp.abs(x - (x_first + x_last) / 2)  # distance from the nearer course end
+    z = jp.sum(jp.where(valid & (dist[..., None] >= riser_at), rises, 0.0), axis=-1)
+    sign = jp.where(jax.random.bernoulli(k_s), 1.0, -1.0)  # up-then-down or down-then-up
+    return _finish(sign * z, spec)
+
+
+def _pyramid(key: jax.Array, d: jax.Array, spec: TileSpec, sign: float) -> jax.Array:
+    """Four-faceted pyramid (sign +1) or inverted pyramid (-1) over the course, truncated."""
+    slope = _lerp(0.05, 0.45, d)  # nominal face slope; the tile's ~ U(0.9, 1.1) * slope [-]
+    rough = _lerp(0.0, 0.02, d)  # per-vertex roughness ~ U(+-rough) [m]
+    x, y = _grid(spec)
+    k_s, k_a, k_r = jax.random.split(key, 3)
+    slope = slope * jax.random.uniform(k_s, (), minval=0.9, maxval=1.1)
+    inset = jax.random.uniform(k_a, (2,), maxval=0.3)  # base inset at each x end ~ U(0, 0.3) [m]
+    x_first, x_last = spec.course_x0_m + inset[0], spec.course_x1_m - spec.cell_m - inset[1]
+    dist_x = jp.minimum(x - x_first, x_last - x)
+    dist_y = jp.minimum(y, (spec.ny - 1) * spec.cell_m - y)
+    h = jp.minimum(slope * jp.clip(jp.minimum(dist_x, dist_y), 0.0), PYRAMID_MAX_HEIGHT_M)
+    noise = jax.random.uniform(k_r, x.shape, minval=-1.0, maxval=1.0) * rough
+    return _finish(sign * h + noise, spec)
+
+
+_GENERATORS: dict[str, Callable[[jax.Array, jax.Array, TileSpec], jax.Array]] = {
+    "grid_stones": _grid_stones,
+    "two_row_stones": _two_row_stones,
+    "rough_boxes": _rough_boxes,
+    "platform_gap": _platform_gap,
+    "mixed_row_stones": _mixed_row_stones,
+    "beam": _beam,
+    "stairs": _stairs,
+    "pyramid_up": lambda key, d, spec: _pyramid(key, d, spec, 1.0),
+    "pyramid_down": lambda key, d, spec: _pyramid(key, d, spec, -1.0),
+}
+assert tuple(_GENERATORS) == TERRAIN_TYPES
+
+
+def check_terrain_name(name: str) -> int:
+    """Returns the index of ``name`` in TERRAIN_TYPES; ValueError naming the choices if unknown."""
+    if name not in TERRAIN_TYPES:
+        raise ValueError(
+            f"unknown terrain type {name!r}; valid choices: {', '.join(TERRAIN_TYPES)}"
+        )
+    return TERRAIN_TYPES.index(name)
+
+
+def check_difficulty(difficulty) -> None:
+    """ValueError if a concrete difficulty lies outside [0, 1]; traced values are not checked."""
+    try:
+        value = np.asarray(difficulty, dtype=np.float64)
+    except (jax.errors.TracerArrayConversionError, jax.errors.ConcretizationTypeError):
+        return  # traced: clipped to [0, 1] by the generator
+    if value.size and not (np.all(np.isfinite(value)) and value.min() >= 0 and value.max() <= 1):
+        raise ValueError(f"difficulty={difficulty!r} outside the valid range [0, 1]")
+
+
+def generate_tile(
+    name: str, key: jax.Array, difficulty: float | jax.Array, spec: TileSpec | None = None
+) -> jax.Array:
+    """Generates one terrain tile.
+
+    Jit- and vmap-able over ``key`` and ``difficulty``; ``name`` and ``spec`` are static (pass them
+    as static arguments under ``jax.jit``). A concrete difficulty outside [0, 1] raises ValueError;
+    a traced difficulty is clipped to [0, 1].
+
+    Difficulty 0 -> 1 (linear in the parameters): stone tops shrink (grid 0.60 -> 0.18 m,
+    two-row 0.60 -> 0.18 m, mixed 0.50 -> 0.18 m), gaps widen (grid 0.05 -> 0.35 m, two-row
+    0.05 -> 0.45 m, mixed 0.05 -> 0.40 m, platform gaps 0.05 -> 0.75 m), height spread grows
+    (stones 0 -> 0.15-0.20 m, boxes 0.04 -> 0.30 m, mixed bricks/high stones +-0.20 m), the beam
+    narrows (0.80 -> 0.16 m), stairs steepen (rise 0.05 -> 0.25 m, tread 0.45 -> 0.28 m) and
+    pyramid faces steepen (slope 0.05 -> 0.45).
+
+    Args:
+      name: one of TERRAIN_TYPES (static).
+      key: PRNG key; the only source of randomness (placement jitter, heights, sizes).
+      difficulty: scalar in [0, 1].
+      spec: tile geometry (static); ``TileSpec()`` if None.
+
+    Returns:
+      (ny, nx) float32 heights [m] in the Heightfield layout (rows along +y, columns along +x), in
+      [spec.pit_z_m, spec.pit_z_m + spec.z_range_m]. Start platform (columns < spec.n_start) and
+      goal region (columns >= nx - spec.n_goal) are flat at z = 0 (the spawn surface of every type).
+    """
+    check_terrain_name(name)
+    check_difficulty(difficulty)
+    spec = TileSpec() if spec is None else spec
+    d = jp.clip(jp.asarray(difficulty, jp.float32), 0.0, 1.0)
+    return _GENERATORS[name](key, d, spec)

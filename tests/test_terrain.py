@@ -1,0 +1,527 @@
+"""Tests of foottof.terrain tiles, terrain map and curriculum (geometry measured from the arrays)."""
+
+import time
+
+import jax
+import jax.numpy as jp
+import mujoco
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from configs import _terrain
+from foottof.terrain import (
+    SPAWN_X,
+    SPAWN_Y,
+    SPAWN_YAW,
+    SPAWN_Z,
+    STAGE1_TYPES,
+    TERRAIN_TYPES,
+    Heightfield,
+    TerrainMapSpec,
+    TileSpec,
+    allocate_columns,
+    build_terrain_map,
+    generate_tile,
+    initial_columns,
+    initial_levels,
+    make_eval_map_spec,
+    progress_fraction,
+    sample_spawn_goal,
+    tile_at,
+    update_levels,
+)
+from foottof.terrain.heightfield import hfield_xml, write_to_mjmodel, write_to_mjx
+
+SPEC = TileSpec()
+CELL = SPEC.cell_m
+PIT = SPEC.pit_z_m
+DIFFS = (0.0, 0.5, 1.0)
+NSEED = 20
+
+
+@pytest.fixture(scope="module")
+def tiles():
+    """name -> (len(DIFFS), NSEED, ny, nx) heights; one jit per type, vmapped over seeds x diffs."""
+    keys = jax.random.split(jax.random.key(1234), NSEED)
+    out = {}
+    for name in TERRAIN_TYPES:
+        per_seed = jax.vmap(lambda k, d, n=name: generate_tile(n, k, d), (0, None))
+        gen = jax.jit(jax.vmap(per_seed, (None, 0)))  # -> (difficulty, seed, ny, nx)
+        out[name] = np.asarray(gen(keys, jp.asarray(DIFFS)))
+    return out
+
+
+# ------------------------------------------------------------------ measurements on the arrays
+
+
+def _course(z):
+    return z[..., SPEC.n_start : SPEC.nx - SPEC.n_goal]
+
+
+def _stone_sizes_x(z):
+    """Flat-top length along x [m] of every stone (4-connected vertices above the pit) that lies
+    wholly inside the course, not touching its borders."""
+    solid = _course(z) > PIT + 0.5
+    labels, n = ndimage.label(solid)
+    sizes = []
+    for sl in ndimage.find_objects(labels):
+        ys, xs = sl
+        if xs.start == 0 or xs.stop == solid.shape[1] or ys.start == 0 or ys.stop == solid.shape[0]:
+            continue
+        sizes.append((xs.stop - xs.start - 1) * CELL)
+    return sizes
+
+
+def _gaps_x(z):
+    """Edge-to-edge widths [m] of every pit run along x bounded by solid vertices on both sides
+    (vertex spacing: a run of k pit vertices between two solid vertices spans (k + 1) cells)."""
+    gaps = []
+    for row in z > PIT + 0.5:
+        idx = np.flatnonzero(row)
+        jumps = np.diff(idx)
+        gaps.extend(((jumps[jumps > 1]) * CELL).tolist())
+    return gaps
+
+
+def _solid_tops(z):
+    c = _course(z)
+    return c[c > PIT + 0.5]
+
+
+def _steps_x(z, min_step=0.005):
+    """|dz| between x-neighbours where both are above the pit and |dz| > min_step [m]."""
+    c = _course(z)
+    dz = np.abs(np.diff(c, axis=-1))
+    ok = (c[..., 1:] > PIT + 0.5) & (c[..., :-1] > PIT + 0.5) & (dz > min_step)
+    return dz[ok]
+
+
+def _beam_widths(z):
+    """Width [m] of the solid run in each course column that has any solid vertex."""
+    widths = []
+    for col in (_course(z) > PIT + 0.5).T:
+        if col.any():
+            widths.append((col.sum() - 1) * CELL)
+    return widths
+
+
+def _mean_over_seeds(tiles_d, fn):
+    vals = [v for z in tiles_d for v in np.atleast_1d(fn(z))]
+    assert len(vals) > 0
+    return float(np.mean(vals))
+
+
+def _strictly_monotone(values, decreasing, margin):
+    pairs = zip(values[:-1], values[1:], strict=True)
+    if decreasing:
+        return all(a - b > margin for a, b in pairs)
+    return all(b - a > margin for a, b in pairs)
+
+
+# ----------------------------------------------------------------------------- tile properties
+
+
+def test_types_in_paper_order():
+    assert TERRAIN_TYPES == (
+        "grid_stones",
+        "two_row_stones",
+        "rough_boxes",
+        "platform_gap",
+        "mixed_row_stones",
+        "beam",
+        "stairs",
+        "pyramid_up",
+        "pyramid_down",
+    )
+    assert STAGE1_TYPES == TERRAIN_TYPES[:5]
+    assert SPEC.shape == (100, 150)
+
+
+@pytest.mark.parametrize("name", TERRAIN_TYPES)
+def test_heights_finite_bounded_platforms_flat(tiles, name):
+    z = tiles[name]
+    assert z.shape == (len(DIFFS), NSEED, SPEC.ny, SPEC.nx) and z.dtype == np.float32
+    assert np.isfinite(z).all()
+    # Everything is either exactly the pit floor or a surface within +-0.7 m of the start platform.
+    is_pit = z == np.float32(PIT)
+    assert (is_pit | (np.abs(z) <= 0.7)).all()
+    assert np.all(z[..., : SPEC.n_start] == 0.0), "start platform must be flat at z = 0"
+    assert np.all(z[..., SPEC.nx - SPEC.n_goal :] == 0.0), "goal region must be flat at z = 0"
+    # The start platform's last column meets the course: its neighbours exist (no NaN edge).
+    assert z.shape[-1] == SPEC.n_start + (SPEC.nx - SPEC.n_start - SPEC.n_goal) + SPEC.n_goal
+
+
+@pytest.mark.parametrize("name", ("grid_stones", "two_row_stones", "mixed_row_stones"))
+def test_stones_shrink_and_gaps_widen(tiles, name):
+    sizes = [_mean_over_seeds(t, _stone_sizes_x) for t in tiles[name]]
+    gaps = [_mean_over_seeds(t, _gaps_x) for t in tiles[name]]
+    assert _strictly_monotone(sizes, decreasing=True, margin=0.05), sizes
+    assert _strictly_monotone(gaps, decreasing=False, margin=0.05), gaps
+    # Easy end walkable blind (big stones, ~5 cm gaps); hard end at/beyond the hardware scale
+    # (20 x 20 cm stones).
+    assert sizes[0] >= 0.3 and gaps[0] <= 0.10, (sizes, gaps)
+    assert sizes[-1] <= 0.20 and gaps[-1] >= 0.25, (sizes, gaps)
+
+
+@pytest.mark.parametrize("name", ("grid_stones", "two_row_stones", "platform_gap", "mixed_row_stones"))
+def test_height_variation_grows(tiles, name):
+    spread = [_mean_over_seeds(t, lambda z: np.std(_solid_tops(z))) for t in tiles[name]]
+    assert spread[0] < 0.005, spread  # easy: level tops
+    assert _strictly_monotone(spread, decreasing=False, margin=0.01), spread
+
+
+def test_mixed_rows_reach_20cm_height_changes(tiles):
+    hard = tiles["mixed_row_stones"][-1]
+    ranges = [np.ptp(_solid_tops(z)) for z in hard]
+    assert np.mean(ranges) >= 0.35, ranges  # low bricks -20 cm and high stones +20 cm
+
+
+def test_platform_gaps_widen_to_60cm(tiles):
+    gaps = [_mean_over_seeds(t, _gaps_x) for t in tiles["platform_gap"]]
+    assert _strictly_monotone(gaps, decreasing=False, margin=0.1), gaps
+    assert gaps[0] <= 0.1, gaps
+    max_hard = [max(_gaps_x(z)) for z in tiles["platform_gap"][-1]]
+    assert min(max_hard) >= 0.6, max_hard
+
+
+def test_beam_narrows(tiles):
+    widths = [_mean_over_seeds(t, _beam_widths) for t in tiles["beam"]]
+    assert _strictly_monotone(widths, decreasing=True, margin=0.1), widths
+    assert widths[-1] <= 0.2 and widths[0] >= 0.7, widths
+    # Reachable: the beam's gaps along x stay short (<= 20 cm) at every difficulty.
+    for tiles_d in tiles["beam"]:
+        for z in tiles_d:
+            centre = (z > PIT + 0.5).any(axis=0)  # columns with any beam vertex
+            runs = np.diff(np.flatnonzero(centre))
+            assert runs.max() * CELL <= 0.2
+
+
+@pytest.mark.parametrize("name", ("rough_boxes", "stairs"))
+def test_step_height_grows(tiles, name):
+    steps = [_mean_over_seeds(t, _steps_x) for t in tiles[name]]
+    assert _strictly_monotone(steps, decreasing=False, margin=0.02), steps
+    if name == "stairs":
+        assert 0.04 <= steps[0] <= 0.06 and steps[-1] >= 0.2, steps
+
+
+@pytest.mark.parametrize("name", ("pyramid_up", "pyramid_down"))
+def test_pyramids_steepen(tiles, name):
+    sign = 1.0 if name == "pyramid_up" else -1.0
+    peak = [np.mean([np.max(sign * z) for z in t]) for t in tiles[name]]
+    slope = [
+        _mean_over_seeds(t, lambda z: np.median(np.abs(np.diff(_course(z), axis=-1))) / CELL)
+        for t in tiles[name]
+    ]
+    assert _strictly_monotone(peak, decreasing=False, margin=0.1), peak
+    assert _strictly_monotone(slope, decreasing=False, margin=0.05), slope
+
+
+@pytest.mark.parametrize("name", TERRAIN_TYPES)
+def test_same_key_same_tile_and_jit_equals_eager(tiles, name):
+    key = jax.random.split(jax.random.key(1234), NSEED)[0]
+    with jax.disable_jit():
+        eager = np.asarray(generate_tile(name, key, 0.5))
+    np.testing.assert_allclose(eager, tiles[name][1, 0], atol=1e-5)  # vmap + jit == eager
+    # Different keys give different tiles (placement is random).
+    assert not np.array_equal(tiles[name][1, 0], tiles[name][1, 1])
+
+
+def test_same_key_same_tile_repeat():
+    gen = jax.jit(generate_tile, static_argnums=0)
+    a = gen("grid_stones", jax.random.key(7), 0.3)
+    b = gen("grid_stones", jax.random.key(7), 0.3)
+    np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+# --------------------------------------------------------------------------------- bad input
+
+
+def test_bad_name_and_difficulty_raise():
+    key = jax.random.key(0)
+    with pytest.raises(ValueError, match=r"'stepping'.*grid_stones.*pyramid_down"):
+        generate_tile("stepping", key, 0.5)
+    for bad in (-0.1, 1.5, float("nan"), np.array([0.2, 1.2])):
+        with pytest.raises(ValueError, match=r"outside the valid range \[0, 1\]"):
+            generate_tile("beam", key, bad)
+    with pytest.raises(ValueError, match="cell_m"):
+        TileSpec(cell_m=0.05)
+    with pytest.raises(ValueError, match="multiple of cell_m"):
+        TileSpec(platform_length_m=1.5)
+
+
+def test_traced_difficulty_is_clipped():
+    gen = jax.jit(generate_tile, static_argnums=0)
+    key = jax.random.key(3)
+    np.testing.assert_array_equal(
+        np.asarray(gen("grid_stones", key, jp.float32(1.7))),
+        np.asarray(gen("grid_stones", key, jp.float32(1.0))),
+    )
+
+
+# -------------------------------------------------------------- physics oracle: dropped spheres
+
+
+def _sphere_targets(z, num):
+    """Pick ``num`` stones (largest distance-to-edge first); returns [(x, y, top_z)] local [m]."""
+    solid = z > PIT + 0.5
+    solid[:, : SPEC.n_start] = False
+    solid[:, SPEC.nx - SPEC.n_goal :] = False
+    labels, n = ndimage.label(solid)
+    dist = ndimage.distance_transform_cdt(solid, metric="chessboard")
+    picks = []
+    for lab in range(1, n + 1):
+        d = np.where(labels == lab, dist, 0)
+        i, j = np.unravel_index(np.argmax(d), d.shape)
+        if d[i, j] >= 3:  # at least 2 flat cells around the centre vertex
+            picks.append((d[i, j], j * CELL, i * CELL, float(z[i, j])))
+    picks.sort(key=lambda p: (-p[3], -p[0]))  # highest tops first
+    return [p[1:] for p in picks[:num]]
+
+
+def _drop_model(z, targets, pit_xy, radius):
+    hf = Heightfield(heights=jp.asarray(z), cell_m=CELL, z_floor_m=PIT, z_range_m=SPEC.z_range_m)
+    asset, geom = hfield_xml(hf, geom_attrs='contype="2" conaffinity="1"')
+    bodies = "".join(
+        f'<body pos="{x} {y} {top + radius + 0.15}"><freejoint/>'
+        f'<geom type="sphere" size="{radius}" mass="0.5" contype="1" conaffinity="2"/></body>'
+        for x, y, top in [*targets, (*pit_xy, PIT)]
+    )
+    xml = (
+        f'<mujoco><option timestep="0.002"/><asset>{asset}</asset>'
+        f"<worldbody>{geom}{bodies}</worldbody></mujoco>"
+    )
+    m = mujoco.MjModel.from_xml_string(xml)
+    write_to_mjmodel(m, hf)
+    return m, hf
+
+
+@pytest.fixture(scope="module")
+def drop_setup(tiles):
+    z = tiles["mixed_row_stones"][-1, 0]  # hard: bricks at -20 cm, high stones at +20 cm
+    targets = _sphere_targets(z, 3)
+    assert len(targets) == 3
+    pit = np.argwhere(_course(z) < PIT + 0.5)[len(np.argwhere(_course(z) < PIT + 0.5)) // 2]
+    pit_xy = ((pit[1] + SPEC.n_start) * CELL, pit[0] * CELL)
+    radius = 0.05
+    # The pit target must be well clear of stones for a clean drop.
+    i, j = pit[0], pit[1] + SPEC.n_start
+    assert np.all(z[max(i - 3, 0) : i + 4, j - 3 : j + 4] == PIT)
+    m, hf = _drop_model(z, targets, pit_xy, radius)
+    expected = np.array([top for _, _, top in targets] + [PIT]) + radius
+    return m, hf, expected
+
+
+def test_sphere_rests_on_stone_tops_mujoco_c(drop_setup):
+    m, _, expected = drop_setup
+    d = mujoco.MjData(m)
+    for _ in range(750):  # 1.5 s
+        mujoco.mj_step(m, d)
+    z_rest = d.qpos.reshape(-1, 7)[:, 2]
+    np.testing.assert_allclose(z_rest, expected, atol=3e-3)
+    assert np.ptp(expected[:-1]) > 0.05  # the targets really are at different heights
+
+
+def test_sphere_rests_on_stone_tops_mjx(drop_setup):
+    from mujoco import mjx
+
+    m, hf, expected = drop_setup
+    mx = write_to_mjx(mjx.put_model(m), hf)
+    dx = mjx.put_data(m, mujoco.MjData(m))
+
+    @jax.jit
+    def run(mx, dx):
+        return jax.lax.fori_loop(0, 750, lambda _, d: mjx.step(mx, d), dx)
+
+    z_rest = np.asarray(run(mx, dx).qpos).reshape(-1, 7)[:, 2]
+    np.testing.assert_allclose(z_rest, expected, atol=3e-3)
+
+
+# ------------------------------------------------------------------------------- terrain map
+
+SMALL_TILE = TileSpec(length_m=4.0, width_m=2.0, platform_length_m=1.2, goal_length_m=0.8)
+SMALL_MAP = TerrainMapSpec(
+    tile=SMALL_TILE,
+    num_levels=3,
+    col_types=(0, 0, 3, 5),  # grid_stones x 2, platform_gap, beam
+    col_difficulty=((0.0, 1.0), (0.0, 1.0), (0.2, 0.6), (0.5, 0.5)),
+    border_m=0.4,
+)
+
+
+@pytest.fixture(scope="module")
+def small_map():
+    return build_terrain_map(jax.random.key(5), SMALL_MAP)
+
+
+def test_map_layout_matches_tiles(small_map):
+    tm = small_map
+    s, t = SMALL_MAP, SMALL_TILE
+    b = s.border_cells
+    assert tm.hfield.shape == s.hfield_shape == (3 * t.ny + 2 * b, 4 * t.nx + 2 * b)
+    assert tm.hfield.x0_m == tm.hfield.y0_m == pytest.approx(-0.4)
+    assert tm.hfield.z_floor_m == PIT and tm.hfield.cell_m == CELL
+    h = np.asarray(tm.hfield.heights)
+    assert np.all(h[:b] == 0) and np.all(h[:, :b] == 0) and np.all(h[-b:] == 0)
+    np.testing.assert_allclose(np.asarray(tm.difficulty[:, 2]), [0.2, 0.4, 0.6], atol=1e-6)
+    np.testing.assert_allclose(np.asarray(tm.level_difficulty), [0.0, 0.5, 1.0])
+    np.testing.assert_array_equal(np.asarray(tm.col_type), s.col_types)
+    keys = jax.random.split(jax.random.key(5), (3, 4))
+    gen = jax.jit(generate_tile, static_argnums=(0, 3))
+    for lvl, col in ((0, 0), (2, 1), (1, 2), (2, 3)):
+        name = TERRAIN_TYPES[s.col_types[col]]
+        tile = np.asarray(gen(name, keys[lvl, col], tm.difficulty[lvl, col], t))
+        block = h[b + lvl * t.ny : b + (lvl + 1) * t.ny, b + col * t.nx : b + (col + 1) * t.nx]
+        np.testing.assert_allclose(block, tile, atol=1e-5)
+        # World placement: the vertex at tile-local (i, j) is at (col * L_x + j c, lvl * L_y + i c).
+        xy = jp.array([col * t.length_m + 60 * CELL + 1e-4, lvl * t.width_m + 17 * CELL + 1e-4])
+        assert float(tm.hfield.height_at(xy)) == pytest.approx(float(tile[17, 60]), abs=1e-3)
+
+
+def test_spawn_and_goal_on_flat_regions(small_map):
+    tm = small_map
+    sp, goal = np.asarray(tm.spawn), np.asarray(tm.goal)
+    assert sp.shape == (3, 4, 4) and goal.shape == (3, 4, 2)
+    assert np.all(sp[..., SPAWN_YAW] == 0) and np.all(sp[..., SPAWN_Z] == 0)
+    hs = np.asarray(tm.hfield.height_at(jp.asarray(sp[..., :2])))
+    hg = np.asarray(tm.hfield.height_at(jp.asarray(goal)))
+    np.testing.assert_array_equal(hs, sp[..., SPAWN_Z])
+    np.testing.assert_array_equal(hg, 0.0)
+    # A 1 m x 0.6 m robot footprint around the spawn lies on the flat start platform.
+    for dx in (-0.5, 0.0, 0.5):
+        for dy in (-0.3, 0.3):
+            off = jp.array([dx, dy])
+            assert np.all(np.asarray(tm.hfield.height_at(jp.asarray(sp[..., :2]) + off)) == 0)
+    lvl, col = tile_at(tm, jp.asarray(sp[..., :2]))
+    ll, cc = np.meshgrid(np.arange(3), np.arange(4), indexing="ij")
+    np.testing.assert_array_equal(np.asarray(lvl), ll)
+    np.testing.assert_array_equal(np.asarray(col), cc)
+    lvl, col = tile_at(tm, jp.asarray(goal))
+    np.testing.assert_array_equal(np.asarray(col), cc)
+    assert np.all(goal[..., 0] > sp[..., SPAWN_X] + 2.0)
+    np.testing.assert_allclose(goal[..., 1], sp[..., SPAWN_Y])
+
+
+def test_map_regenerates_without_recompiling(small_map):
+    before = build_terrain_map._cache_size()
+    other = build_terrain_map(jax.random.key(6), SMALL_MAP)
+    again = build_terrain_map(jax.random.key(5), SMALL_MAP)
+    assert build_terrain_map._cache_size() == before
+    assert not np.array_equal(np.asarray(other.hfield.heights), np.asarray(small_map.hfield.heights))
+    np.testing.assert_array_equal(
+        np.asarray(again.hfield.heights), np.asarray(small_map.hfield.heights)
+    )
+
+
+def test_sample_spawn_goal_spread(small_map):
+    s = SMALL_MAP
+    n = 2000
+    level = jp.arange(n) % 3
+    col = jp.arange(n) % 4
+    spawn, goal = jax.jit(sample_spawn_goal)(jax.random.key(0), small_map, level, col)
+    dev = np.asarray(spawn - small_map.spawn[level, col])
+    gdev = np.asarray(goal - small_map.goal[level, col])
+    for k, lim in (
+        (SPAWN_X, s.spawn_x_spread_m),
+        (SPAWN_Y, s.spawn_y_spread_m),
+        (SPAWN_YAW, s.spawn_yaw_spread_rad),
+    ):
+        assert np.abs(dev[:, k]).max() <= lim + 1e-6 and np.abs(dev[:, k]).max() > 0.9 * lim
+    assert np.all(dev[:, SPAWN_Z] == 0)
+    assert np.abs(gdev[:, 0]).max() <= s.goal_x_spread_m + 1e-6
+    assert np.abs(gdev[:, 1]).max() > 0.9 * s.goal_y_spread_m
+    assert np.corrcoef(dev[:, 0], gdev[:, 0])[0, 1] < 0.1  # independent draws
+    assert np.all(np.asarray(small_map.hfield.height_at(spawn[:, :2])) == 0)
+    assert np.all(np.asarray(small_map.hfield.height_at(goal)) == 0)
+
+
+def test_stage_specs_from_config():
+    cfg = _terrain.get_section()
+    s1 = TerrainMapSpec.from_config(cfg, 1)
+    s2 = TerrainMapSpec.from_config(cfg, 2)
+    assert s1.num_cols == s2.num_cols == cfg.num_cols
+    assert set(s1.col_types) == set(range(5))
+    assert set(s2.col_types) == set(range(9))
+    stones = {TERRAIN_TYPES.index(n) for n in ("grid_stones", "two_row_stones", "mixed_row_stones")}
+    assert np.mean([t in stones for t in s1.col_types]) >= 0.6  # mostly stepping stones
+    lo1 = {t: r[0] for t, r in zip(s1.col_types, s1.col_difficulty, strict=True)}
+    lo2 = {t: r[0] for t, r in zip(s2.col_types, s2.col_difficulty, strict=True)}
+    assert all(lo2[t] > lo1[t] for t in range(5))  # stage-1 types shifted harder in stage 2
+    assert s1.hfield_shape == (10 * 100 + 50, 20 * 150 + 50)
+    with pytest.raises(ValueError, match="stage=3"):
+        TerrainMapSpec.from_config(cfg, 3)
+
+
+def test_eval_ensemble_spec():
+    cfg = _terrain.get_section()
+    e = make_eval_map_spec(cfg, num_cols=10)
+    names = [TERRAIN_TYPES[t] for t in e.col_types]
+    assert names.count("platform_gap") == 2 and len(names) == 10  # 20 % gaps, 80 % stones
+    lo, hi = cfg.stage1_difficulty.grid_stones
+    assert all(r == pytest.approx((lo + 0.9 * (hi - lo),) * 2) for r in e.col_difficulty)
+    with pytest.raises(ValueError, match="'stairs'"):
+        make_eval_map_spec(cfg, types=("stairs",), weights=(1.0,))
+
+
+def test_allocate_columns():
+    cols = allocate_columns({"grid_stones": 0.5, "beam": 0.25, "stairs": 0.25}, 8)
+    assert cols == (0, 0, 0, 0, 5, 5, 6, 6)
+    cols = allocate_columns({"grid_stones": 0.98, "beam": 0.01, "stairs": 0.01}, 3)
+    assert sorted(set(cols)) == [0, 5, 6]  # every positive weight keeps a column
+    with pytest.raises(ValueError, match="'rocks'.*valid choices"):
+        allocate_columns({"rocks": 1.0}, 4)
+    with pytest.raises(ValueError, match="num_cols"):
+        allocate_columns({"beam": 1.0}, 0)
+
+
+@pytest.mark.slow
+def test_full_training_map_builds_fast():
+    spec = TerrainMapSpec.from_config(_terrain.get_section(), 2)
+    build_terrain_map(jax.random.key(0), spec).hfield.heights.block_until_ready()
+    t0 = time.perf_counter()
+    for i in range(3):
+        build_terrain_map(jax.random.key(i + 1), spec).hfield.heights.block_until_ready()
+    assert (time.perf_counter() - t0) / 3 < 2.0
+
+
+# -------------------------------------------------------------------------------- curriculum
+
+
+def test_progress_fraction_hand_values():
+    s, g = jp.array([0.0, 0.0]), jp.array([4.0, 0.0])
+    xy = jp.array([[4.0, 0.0], [2.0, 0.0], [0.0, 0.0], [-1.0, 0.0], [4.0, 3.0]])
+    # distances to goal 0, 2, 4, 5, 3 out of 4 -> 1, 0.5, 0, -0.25, 0.25
+    np.testing.assert_allclose(np.asarray(progress_fraction(s, g, xy)), [1, 0.5, 0, -0.25, 0.25])
+
+
+def test_update_levels_rules():
+    num_levels = 5
+    level = jp.array([2, 2, 2, 0, 3, 2, 4])
+    done = jp.array([True, True, True, True, True, False, False])
+    reached = jp.array([True, False, False, False, True, True, True])
+    progress = jp.array([1.0, 0.2, 0.7, 0.0, 1.0, 1.0, 1.0])
+    new = update_levels(jax.random.key(0), level, done, reached, progress, num_levels, 0.5)
+    # up, down (< half), stay (>= half), floor at 0, up, not done, not done
+    np.testing.assert_array_equal(np.asarray(new), [3, 1, 2, 0, 4, 2, 4])
+
+
+def test_update_levels_top_level_goes_random():
+    n, num_levels = 4000, 6
+    level = jp.full((n,), num_levels - 1)
+    ones = jp.ones((n,), bool)
+    new = jax.jit(update_levels, static_argnums=(5, 6))(
+        jax.random.key(1), level, ones, ones, jp.ones((n,)), num_levels, 0.5
+    )
+    counts = np.bincount(np.asarray(new), minlength=num_levels)
+    assert counts.sum() == n and len(counts) == num_levels
+    assert np.all(np.abs(counts - n / num_levels) < 5 * np.sqrt(n / num_levels))  # ~ uniform
+
+
+def test_initial_levels_and_columns():
+    lv = np.asarray(initial_levels(jax.random.key(0), 1000, 10, 2))
+    assert set(lv.tolist()) == {0, 1, 2}
+    np.testing.assert_array_equal(np.asarray(initial_columns(7, 3)), [0, 1, 2, 0, 1, 2, 0])
+    with pytest.raises(ValueError, match="init_level_max=10"):
+        initial_levels(jax.random.key(0), 4, 10, 10)
+    with pytest.raises(ValueError, match="down_progress_frac=1.5"):
+        update_levels(jax.random.key(0), jp.zeros(2, int), *(jp.ones(2, bool),) * 2, jp.ones(2), 3, 1.5)

@@ -232,10 +232,10 @@ class AnymalToFEnv(Env):
         next_task = sel(fresh_task, cont)
         next_d = sel(fresh_d, d)
         # Sensing on the selected pose: one ray cast per step; buffers restart where done.
-        sensor_state, sense = self.sensing.step(
-            state.info["sensor"], key_obs, next_d, next_task.params, done
-        )
-        obs = self._observe(next_d, next_task, sense, key_obs)
+        key_meas, key_sense = jax.random.split(key_obs)
+        meas = self._measure(key_meas, next_d, next_task.params)
+        sensor_state, sense = self.sensing.step(state.info["sensor"], key_sense, next_d, meas, done)
+        obs = self._observe(next_d, next_task, sense, meas)
         metrics = {f"reward/{k}": v for k, v in terms.items()}
         metrics.update(
             {
@@ -332,10 +332,11 @@ class AnymalToFEnv(Env):
 
     def _reset_episode(self, key, level, col) -> State:
         """A fresh episode on tile (level, col), with sensing and observation."""
-        key_core, key_sense, key_obs = jax.random.split(key, 3)
+        key_core, key_sense, key_meas = jax.random.split(key, 3)
         d, task = self._reset_core(key_core, level, col)
-        sensor_state, sense = self.sensing.reset(key_sense, d, task.params)
-        obs = self._observe(d, task, sense, key_obs)
+        meas = self._measure(key_meas, d, task.params)
+        sensor_state, sense = self.sensing.reset(key_sense, d, meas)
+        obs = self._observe(d, task, sense, meas)
         zero = jp.zeros(())
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
         metrics.update({k: zero for k in EPISODE_METRICS})
@@ -386,31 +387,40 @@ class AnymalToFEnv(Env):
         )
         return d, task
 
-    def _observe(self, d, task: TaskState, sense, key) -> dict[str, jax.Array]:
+    def _measure(self, key, d, p: EpisodeParams) -> sensing.Measurements:
+        """Joint readings (Gaussian noise + static offset) and odometry (uniform noise)."""
+        k1, k2 = jax.random.split(key)
+        q = d.qpos[7:19] + p.joint_offset_rad
+        q = q + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))  # ~ N(0, std^2)
+        lin_b = _quat_rotate_inv(d.qpos[3:7], d.qvel[0:3])
+        lin_n, ang_n = odometry_noise(
+            k2,
+            p.odometry_level,
+            float(self.cfg.env.odometry_lin_noise_ms),
+            float(self.cfg.env.odometry_ang_noise_rads),
+        )
+        return sensing.Measurements(q=q, lin_vel=lin_b + lin_n, ang_vel=d.qvel[3:6] + ang_n)
+
+    def _observe(self, d, task: TaskState, sense, meas: sensing.Measurements) -> dict:
         """Actor and critic observations.
 
-        Actor ``state``: tof (4 x Z readings [m]) + valid (4 x Z) + joint pos rel. to default (12,
-        noisy, + static offset) + joint vel (12, noisy) + projected gravity (3) + base lin vel est.
-        (3, base frame) + base ang vel est. (3) + goal distance (1, clipped at 5 m) + goal direction
-        in the base frame (2, unit) + time left (1, fraction) + last action (12).
-        Critic ``privileged_state``: actor obs without noise + true foot-surrounding heights
-        (4 x 9) + contacts (4) + friction (1) + added mass (1) + noise-free readings (4 x Z).
+        Actor ``state`` (size 181 for 4 sensors x 16 zones): tof readings (F x Z [m]) + validity
+        (F x Z) + frame age (F [s]) + joint positions rel. to default (12, measured) + joint
+        velocities (12, noisy, x0.05) + projected gravity (3) + base linear velocity estimate (3,
+        base frame) + base angular velocity estimate (3, x0.25) + goal distance (1, clipped at
+        5 m) + goal direction in the base frame (2, unit) + time left (1, fraction) + last
+        action (12).
+        Critic ``privileged_state``: the same without noise (true readings, joints, velocities)
+        + true terrain heights around each foot relative to the foot centre (4 x 9, 10 cm grid)
+        + foot contacts (4) + friction (1) + added base mass (1, x0.1).
         """
         p = task.params
         qpos, qvel = d.qpos, d.qvel
         base_quat = qpos[3:7]
-        k1, k2, k3 = jax.random.split(key, 3)
-        q_rel = qpos[7:19] - self._default_q
         qd = qvel[6:18]
-        q_meas = q_rel + p.joint_offset_rad + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))
-        qd_meas = qd + p.joint_vel_noise_rads * jax.random.normal(k2, (12,))
+        qd_meas = qd + p.joint_vel_noise_rads * jax.random.normal(task.rng, (12,))
         gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
         lin_b = _quat_rotate_inv(base_quat, qvel[0:3])
-        ang_b = qvel[3:6]
-        ocfg = self.cfg.env
-        lin_n, ang_n = odometry_noise(
-            k3, p.odometry_level, float(ocfg.odometry_lin_noise_ms), float(ocfg.odometry_ang_noise_rads)
-        )
         to_goal_w = jp.concatenate([task.goal - qpos[0:2], jp.zeros(1)])
         to_goal_b = _quat_rotate_inv(base_quat, to_goal_w)[:2]
         dist = jp.linalg.norm(to_goal_b)
@@ -421,9 +431,10 @@ class AnymalToFEnv(Env):
         def actor(tof, valid, q_in, qd_in, lin, ang):
             return jp.concatenate(
                 [
-                    tof.reshape(-1),  # 4 feet x Z zones [m]
-                    valid.reshape(-1),  # 4 feet x Z zones {0, 1}
-                    q_in,  # 12 joint positions rel. to default [rad]
+                    tof.reshape(-1),  # F sensors x Z zones [m]
+                    valid.reshape(-1),  # F x Z {0, 1}
+                    sense.age_s,  # F frame ages [s]
+                    q_in - self._default_q,  # 12 joint positions rel. to default [rad]
                     qd_in * 0.05,  # 12 joint velocities [rad/s] scaled
                     gravity,  # 3 projected gravity
                     lin,  # 3 base linear velocity estimate [m/s]
@@ -433,8 +444,8 @@ class AnymalToFEnv(Env):
                 ]
             )
 
-        state_obs = actor(sense.distance, sense.valid, q_meas, qd_meas, lin_b + lin_n, ang_b + ang_n)
-        clean = actor(sense.true_distance, sense.true_valid, q_rel, qd, lin_b, ang_b)
+        state_obs = actor(sense.distance, sense.valid, meas.q, qd_meas, meas.lin_vel, meas.ang_vel)
+        clean = actor(sense.true_distance, sense.true_valid, qpos[7:19], qd, lin_b, qvel[3:6])
         fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
         offs = jp.array(
             [[dx, dy] for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1)], jp.float32
@@ -442,7 +453,8 @@ class AnymalToFEnv(Env):
         pts = fk.foot_pos[:, None, :2] + offs[None]  # (4, 9, 2)
         heights = self.hfield.height_at(pts) - fk.foot_pos[:, None, 2]  # rel. to foot centre
         clear = fk.foot_pos[:, 2] - self.hfield.height_at(fk.foot_pos[:, :2])
-        contact = (clear < constants.FOOT_RADIUS_M + float(ocfg.contact_margin_m)).astype(jp.float32)
+        margin = constants.FOOT_RADIUS_M + float(self.cfg.env.contact_margin_m)
+        contact = (clear < margin).astype(jp.float32)
         priv = jp.concatenate(
             [
                 clean,

@@ -112,6 +112,7 @@ class ElevationMapState:
       known: (145, 145) bool, the stored vertex has been seen.
       center_idx: (2,) int32 odometry (x, y) cell index of the stored grid's centre vertex.
       pose_est: (4,) estimated base x, y, z [m] and yaw [rad] in the odometry frame.
+      tilt_prev: (3, 3) roll/pitch rotation of the base at the last update (IMU).
       scan: (101, 101) robot-centric heights relative to the base z [m] (scan_heightfield
         layout): fresh ground truth in view, the moved prior elsewhere, UNKNOWN_HEIGHT_M if never
         seen.
@@ -123,6 +124,7 @@ class ElevationMapState:
     known: jax.Array
     center_idx: jax.Array
     pose_est: jax.Array
+    tilt_prev: jax.Array
     scan: jax.Array
     scan_known: jax.Array
     scan_in_view: jax.Array
@@ -227,6 +229,7 @@ def aggre_init(
         known=jp.zeros((MAP_N, MAP_N), bool),
         center_idx=jp.zeros(2, jp.int32),
         pose_est=jp.zeros(4, dtype),
+        tilt_prev=tilt_rotation(jp.asarray(base_quat, dtype)),
         scan=jp.zeros((SCAN_N, SCAN_N), dtype),
         scan_known=jp.zeros((SCAN_N, SCAN_N), bool),
         scan_in_view=jp.zeros((SCAN_N, SCAN_N), bool),
@@ -251,8 +254,20 @@ def _scroll(state: ElevationMapState) -> ElevationMapState:
     )
 
 
+def _so3_exp(rotvec: jax.Array) -> jax.Array:
+    """(3,) rotation vector [rad] -> (3, 3) rotation matrix (Rodrigues)."""
+    theta = jp.linalg.norm(rotvec)
+    small = theta < 1e-8
+    safe = jp.where(small, 1.0, theta)
+    k = rotvec / safe
+    kx = jp.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]], rotvec.dtype)
+    rot = jp.eye(3, dtype=rotvec.dtype) + jp.sin(theta) * kx + (1.0 - jp.cos(theta)) * kx @ kx
+    return jp.where(small, jp.eye(3, dtype=rotvec.dtype), rot)
+
+
 def dead_reckon(
     pose_est: jax.Array,
+    tilt_prev: jax.Array,
     base_quat: jax.Array,
     lin_vel_est_base: jax.Array,
     ang_vel_est_base: jax.Array,
@@ -260,12 +275,16 @@ def dead_reckon(
 ) -> jax.Array:
     """Zero-order integration of estimated base velocities over one step.
 
-    Roll and pitch come from ``base_quat`` (known from the IMU); its yaw is not used. Velocities
-    are rotated into the yaw frame of the estimated pose and held constant over ``dt``.
+    Roll and pitch are known (IMU): ``tilt_prev`` at the previous step, ``base_quat`` now (its yaw
+    is not used). The heading integrates the body rate held constant over ``dt``:
+    ``R = Rz(yaw_est) @ tilt_prev @ exp([w dt])`` and the new yaw is that of ``R`` (integrating the
+    world-z rate alone would drift when roll and pitch oscillate). The linear velocity, held
+    constant over ``dt``, is rotated into the odometry frame with the new estimated orientation.
 
     Args:
       pose_est: (4,) estimated x, y, z [m], yaw [rad] in the odometry frame.
-      base_quat: (4,) true base orientation (w, x, y, z); only roll and pitch are used.
+      tilt_prev: (3, 3) roll/pitch rotation (tilt_rotation) at the previous step.
+      base_quat: (4,) true base orientation now (w, x, y, z); only roll and pitch are used.
       lin_vel_est_base: (3,) estimated linear velocity in the base frame [m/s].
       ang_vel_est_base: (3,) estimated angular velocity in the base frame [rad/s].
       dt: step duration [s].
@@ -273,12 +292,11 @@ def dead_reckon(
     Returns:
       (4,) the new estimated pose.
     """
-    tilt = tilt_rotation(base_quat)
-    v = tilt @ lin_vel_est_base  # yaw-frame linear velocity [m/s]
-    yaw_rate = (tilt @ ang_vel_est_base)[2]  # world-z angular rate [rad/s]
-    c, s = jp.cos(pose_est[3]), jp.sin(pose_est[3])
-    dpos = jp.stack([c * v[0] - s * v[1], s * v[0] + c * v[1], v[2]]) * dt
-    return jp.concatenate([pose_est[:3] + dpos, pose_est[3:] + yaw_rate * dt])
+    rot = _rot_z(pose_est[3]) @ tilt_prev @ _so3_exp(ang_vel_est_base * dt)
+    yaw = jp.arctan2(rot[1, 0], rot[0, 0])
+    yaw = pose_est[3] + jp.remainder(yaw - pose_est[3] + jp.pi, 2.0 * jp.pi) - jp.pi  # unwrapped
+    dpos = _rot_z(yaw) @ tilt_rotation(base_quat) @ lin_vel_est_base * dt
+    return jp.concatenate([pose_est[:3] + dpos, yaw[None]])
 
 
 def aggre_update(
@@ -311,9 +329,10 @@ def aggre_update(
     """
     if isinstance(dt, (int, float)) and not dt > 0.0:
         raise ValueError(f"dt={dt} must be > 0 s")
-    state = state.replace(
-        pose_est=dead_reckon(state.pose_est, base_quat, lin_vel_est_base, ang_vel_est_base, dt)
+    pose_est = dead_reckon(
+        state.pose_est, state.tilt_prev, base_quat, lin_vel_est_base, ang_vel_est_base, dt
     )
+    state = state.replace(pose_est=pose_est, tilt_prev=tilt_rotation(base_quat))
     state = _scroll(state)
     state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all)
     return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)

@@ -44,7 +44,9 @@ def _flatten(tree: Any) -> tuple[dict, list]:
 def _abstract(tree: Any) -> dict:
     leaves = jax.tree.leaves(tree)
     return {
-        f"leaf_{i:04d}": jax.ShapeDtypeStruct(x.shape, x.dtype, sharding=getattr(x, "sharding", None))
+        f"leaf_{i:04d}": jax.ShapeDtypeStruct(
+            x.shape, x.dtype, sharding=getattr(x, "sharding", None)
+        )
         for i, x in enumerate(leaves)
     }
 
@@ -63,7 +65,9 @@ def check_compatible(item: str, saved_manifest: list, target: Any, source: str) 
             )
     extra = sorted(set(saved) - {name for name, _, _ in expected})
     if extra:
-        raise ValueError(f"{source}: {item} leaf {extra[0]} is in the checkpoint but not in this model")
+        raise ValueError(
+            f"{source}: {item} leaf {extra[0]} is in the checkpoint but not in this model"
+        )
 
 
 class Checkpointer:

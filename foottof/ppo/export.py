@@ -79,7 +79,7 @@ _ACT = {
 
 
 class NumpyPolicy:
-    """Deterministic policy from an exported .npz: `reset()` at episode start, then `policy(obs)`."""
+    """Deterministic policy from an exported .npz: `reset()` per episode, then `policy(obs)`."""
 
     def __init__(self, path: str):
         with np.load(path) as f:

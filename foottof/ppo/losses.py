@@ -1,4 +1,4 @@
-"""GAE with timeout bootstrapping and the clipped PPO loss of rsl_rl (recurrent, sequence minibatches)."""
+"""GAE with timeout bootstrapping and rsl_rl's clipped PPO loss over whole-sequence minibatches."""
 
 from typing import Any, NamedTuple
 
@@ -47,7 +47,8 @@ def compute_gae(
 ) -> tuple[jax.Array, jax.Array]:
     """Generalized advantage estimation (rsl_rl RolloutStorage.compute_returns).
 
-    delta_t = r_t + gamma * (1 - d_t) * V_{t+1} - V_t;  A_t = delta_t + gamma * lam * (1 - d_t) * A_{t+1}.
+    delta_t = r_t + gamma * (1 - d_t) * V_{t+1} - V_t
+    A_t = delta_t + gamma * lam * (1 - d_t) * A_{t+1}
 
     Args:
       rewards: (T, B) rewards (already bootstrapped on truncation).

@@ -11,7 +11,9 @@ import jax.numpy as jp
 import ml_collections
 from brax.training.acme import running_statistics
 
-Carry = Any  # {'actor': ((c, h), ...), 'critic': ((c, h), ...)} per LSTM layer, each (B, H); () for MLP
+Carry = (
+    Any  # {'actor': ((c, h), ...), 'critic': ((c, h), ...)} per LSTM layer, each (B, H); () for MLP
+)
 Params = Any  # flax variables {'params': {...}}
 Obs = Any  # (B, obs) array, or {'state': (B, obs_actor), 'privileged_state': (B, obs_critic)}
 
@@ -33,9 +35,13 @@ class MLP(nn.Module):
     def __call__(self, x: jax.Array) -> jax.Array:
         act = ACTIVATIONS[self.activation]
         for i, width in enumerate(self.hidden):
-            x = nn.Dense(width, kernel_init=nn.initializers.orthogonal(math.sqrt(2.0)), name=f"dense_{i}")(x)
+            x = nn.Dense(
+                width, kernel_init=nn.initializers.orthogonal(math.sqrt(2.0)), name=f"dense_{i}"
+            )(x)
             x = act(x)
-        return nn.Dense(self.out, kernel_init=nn.initializers.orthogonal(self.out_scale), name="out")(x)
+        return nn.Dense(
+            self.out, kernel_init=nn.initializers.orthogonal(self.out_scale), name="out"
+        )(x)
 
 
 class Memory(nn.Module):
@@ -89,7 +95,7 @@ class ActorCritic(nn.Module):
 
 
 def split_obs(obs: Obs) -> tuple[jax.Array, jax.Array]:
-    """Actor and critic observations: dict -> ('state', 'privileged_state' or 'state'); array -> both."""
+    """(actor obs, critic obs): dict -> ['state'], ['privileged_state']; array -> both."""
     if isinstance(obs, dict):
         if ACTOR_KEY not in obs:
             raise ValueError(f"dict observation needs key {ACTOR_KEY!r}; got keys {sorted(obs)}")
@@ -117,7 +123,7 @@ def gaussian_entropy(log_std: jax.Array) -> jax.Array:
 
 
 def gaussian_kl(mean_old, std_old, mean_new, std_new) -> jax.Array:
-    """KL(old || new) of diagonal Gaussians summed over the last axis (rsl_rl formula): (..., A) -> (...)."""
+    """KL(old || new) of diagonal Gaussians (rsl_rl formula), summed: (..., A) -> (...)."""
     return jp.sum(
         jp.log(std_new / std_old)
         + (std_old**2 + (mean_old - mean_new) ** 2) / (2.0 * std_new**2)
@@ -205,7 +211,7 @@ class Networks:
         return means, log_stds[0], values
 
     def policy_fn(self, params: Params, normalizer, deterministic: bool = True):
-        """(carry, obs (B, ...), reset (B,), key) -> (carry, action (B, A)); deterministic = mean."""
+        """(carry, obs, reset (B,), key) -> (carry, action (B, A)); mean if deterministic."""
 
         def act(carry, obs, reset, key):
             carry, mean, log_std, _ = self.step(params, normalizer, carry, obs, reset)

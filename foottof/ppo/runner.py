@@ -1,4 +1,4 @@
-"""Python training loop: run dir, config, CSV/TensorBoard logs, checkpoints, resume, NaN guard, Ctrl-C."""
+"""Python training loop: run dir, config, logs, checkpoints, resume, NaN guard, Ctrl-C."""
 
 import csv
 import json
@@ -16,6 +16,28 @@ from foottof.ppo import train as train_lib
 
 CPU_MAX_NUM_ENVS = 256  # above this many envs on a CPU backend the run is GPU-sized: warn
 _WATCHED = ("loss/policy", "loss/value", "loss/entropy", "ppo/kl")  # NaN guard (plus params)
+
+
+_CACHE: dict = {}  # (id(env), ppo+network json) -> (env, Train, compiled iteration); last 4 runs
+_CACHE_SIZE = 4
+
+
+def _cache_key(env, cfg: ml_collections.ConfigDict) -> tuple:
+    dump = lambda c: c.to_json_best_effort(sort_keys=True)
+    return id(env), dump(cfg.ppo), dump(cfg.network), tuple(str(d) for d in jax.devices())
+
+
+def _trainer(env, cfg: ml_collections.ConfigDict):
+    """make_train + compiled iteration, reused by run() calls with the same env and sections."""
+    key = _cache_key(env, cfg)
+    hit = _CACHE.get(key)
+    if hit is not None and hit[0] is env:
+        return hit[1], hit[2], True
+    trainer = train_lib.make_train(env, cfg)
+    if len(_CACHE) >= _CACHE_SIZE:
+        _CACHE.pop(next(iter(_CACHE)))
+    _CACHE[key] = (env, trainer, None)
+    return trainer, None, False
 
 
 class NonFiniteError(FloatingPointError):
@@ -56,8 +78,12 @@ def format_line(it: int, total: int, sps: float, eta_s: float, m: dict) -> str:
     parts.append(
         f"loss pi {g('loss/policy'):.3g} v {g('loss/value'):.3g} ent {g('loss/entropy'):.3g}"
     )
-    parts.append(f"kl {g('ppo/kl'):.3g} lr {g('ppo/learning_rate'):.2e} std {g('ppo/action_std'):.3g}")
-    rewards = [f"{k[len('reward/'):]} {v:.3g}" for k, v in sorted(m.items()) if k.startswith("reward/")]
+    parts.append(
+        f"kl {g('ppo/kl'):.3g} lr {g('ppo/learning_rate'):.2e} std {g('ppo/action_std'):.3g}"
+    )
+    rewards = [
+        f"{k[len('reward/') :]} {v:.3g}" for k, v in sorted(m.items()) if k.startswith("reward/")
+    ]
     if rewards:
         parts.append("reward: " + " ".join(rewards))
     return " | ".join(parts)
@@ -90,7 +116,7 @@ class _Logs:
             w.writerow(row)
         if self.writer is not None:
             for k, v in row.items():
-                if k != "iteration":
+                if k != "iteration" and math.isfinite(v):
                     self.writer.add_scalar(k, v, step)
 
     def close(self) -> None:
@@ -164,9 +190,13 @@ def run(
     if resume and not has_ckpt:
         raise FileNotFoundError(f"resume: no checkpoint in {run_dir}/{ckpt.CHECKPOINT_SUBDIR}")
     if not resume and has_ckpt:
-        raise FileExistsError(f"{run_dir} already holds checkpoints; pass resume=True or a new run dir")
+        raise FileExistsError(
+            f"{run_dir} already holds checkpoints; pass resume=True or a new run dir"
+        )
+    main = jax.process_index() == 0  # only process 0 writes config, logs and progress lines
     os.makedirs(run_dir, exist_ok=True)
-    _write_config(cfg, run_dir)
+    if main:
+        _write_config(cfg, run_dir)
 
     if jax.default_backend() == "cpu" and cfg.ppo.num_envs > CPU_MAX_NUM_ENVS:
         print(
@@ -175,7 +205,7 @@ def run(
             f"(or use the CPU config)"
         )
 
-    trainer = train_lib.make_train(env, cfg)
+    trainer, iteration, cached = _trainer(env, cfg)
     key = jax.random.PRNGKey(int(cfg.get("seed", 0)))
     state = trainer.init(key)
     checkpointer = ckpt.Checkpointer(run_dir, int(t.max_checkpoints), bool(t.checkpoint_env_state))
@@ -186,20 +216,25 @@ def run(
             state = state.replace(**{f: getattr(fresh, f) for f in ckpt.ITEMS["rollout"]})
         print(f"[runner] resumed from iteration {int(state.iteration)} in {checkpointer.directory}")
     elif init_from:
-        params, normalizer = ckpt.load_params_and_normalizer(init_from, state.params, state.normalizer)
+        params, normalizer = ckpt.load_params_and_normalizer(
+            init_from, state.params, state.normalizer
+        )
         state = state.replace(params=params, normalizer=normalizer)
         print(f"[runner] params and normalizer initialized from {init_from}")
 
     t0 = time.time()
-    iteration = trainer.iteration.lower(state).compile()
+    if iteration is None:
+        iteration = trainer.iteration.lower(state).compile()
+        _CACHE[_cache_key(env, cfg)] = (env, trainer, iteration)
     compile_s = time.time() - t0
     print(
         f"[runner] {len(trainer.mesh.devices.flat)} {jax.default_backend()} device(s), "
         f"{trainer.num_envs} envs x {cfg.ppo.num_steps} steps, "
         f"{train_lib.num_params(state.params)} params; compiled in {compile_s:.1f} s"
+        + (" (cached)" if cached else "")
     )
 
-    logs = _Logs(run_dir, bool(t.tensorboard))
+    logs = _Logs(run_dir, bool(t.tensorboard)) if main else None
     total = int(t.num_iterations)
     it = int(state.iteration)
     last_saved = checkpointer.latest_step()
@@ -229,8 +264,9 @@ def run(
                 "training/sps": sps,
                 **metrics,
             }
-            logs.write(row, it)
-            if it % int(t.log_every) == 0 or it == total:
+            if main:
+                logs.write(row, it)
+            if main and (it % int(t.log_every) == 0 or it == total):
                 print(format_line(it, total, sps, avg * (total - it), metrics), flush=True)
             if on_iteration is not None:
                 on_iteration(it, metrics, state)
@@ -246,6 +282,7 @@ def run(
             print(f"[runner] interrupted: kept checkpoint {last_saved} (state not saveable)")
         raise
     finally:
-        logs.close()
+        if logs is not None:
+            logs.close()
         checkpointer.close()
     return state

@@ -11,9 +11,10 @@ class CueMemoryEnv:
     """Single-env memory task with its own auto-reset.
 
     At step 0 the observation shows a cue c ~ U{-1, +1} and a first-step flag; at every later step
-    both read 0. The action a (1,) is rewarded at steps 1..L-1 with r = -|clip(a, -2, 2) - c|; step 0
-    pays 0. A memoryless policy sees identical observations at steps >= 1 whatever the cue, so its
-    expected reward per step there is <= -(|a - 1| + |a + 1|) / 2 <= -1; recalling the cue earns 0.
+    both read 0. The action a (1,) is rewarded at steps 1..L-1 with r = -|clip(a, -2, 2) - c|;
+    step 0 pays 0. A memoryless policy sees identical observations at steps >= 1 whatever the
+    cue, so its expected reward per step there is <= -(|a - 1| + |a + 1|) / 2 <= -1; recalling
+    the cue earns 0.
     The episode terminates (done=1, truncation=0) after L steps; metrics:
     'episode/success' (1 if every rewarded action had the cue's sign; read at done steps) and
     'reward/recall' (the step reward).

@@ -1,9 +1,10 @@
-"""One compiled LSTM-PPO iteration (rollout + update epochs), data-parallel over a 'data' device mesh.
+"""One compiled LSTM-PPO iteration (rollout + update epochs), data-parallel over a 'data' mesh.
 
-Env contract (batched, Brax-style): `reset(keys (N, 2)) -> State`, `step(state, actions (N, A)) -> State`,
-auto-reset inside `step`, `State.obs` an (N, obs) array or a dict {'state': actor obs,
-'privileged_state': critic obs}, `State.reward` (N,), `State.done` (N,), `State.info['truncation']`
-(N,) (1 where the episode ended by its time limit), `State.metrics` a dict of (N,) arrays, `action_size`.
+Env contract (batched, Brax-style): `reset(keys (N, 2)) -> State`,
+`step(state, actions (N, A)) -> State`, auto-reset inside `step`, `State.obs` an (N, obs) array
+or a dict {'state': actor obs, 'privileged_state': critic obs}, `State.reward` (N,),
+`State.done` (N,), `State.info['truncation']` (N,) (1 where the episode ended by its time limit),
+`State.metrics` a dict of (N,) arrays, and an `action_size` attribute.
 Every leaf of the batched State must have the env axis first (it is sharded over devices).
 `wrap_brax_env` makes such an env from any single Brax `Env`; `VmapEnv` from a single env that
 auto-resets itself (our locomotion env).
@@ -153,7 +154,7 @@ def _set_learning_rate(opt_state, lr):
 
 
 def adapt_learning_rate(lr, kl, desired_kl: float, lr_min: float, lr_max: float):
-    """rsl_rl adaptive rule: kl > 2 desired -> lr / 1.5; 0 < kl < desired / 2 -> lr * 1.5; clamped."""
+    """rsl_rl rule: kl > 2 desired -> lr / 1.5; 0 < kl < desired / 2 -> lr * 1.5; then clamp."""
     lr = jp.where(kl > 2.0 * desired_kl, jp.maximum(lr / 1.5, lr_min), lr)
     return jp.where((kl < 0.5 * desired_kl) & (kl > 0.0), jp.minimum(lr * 1.5, lr_max), lr)
 
@@ -195,11 +196,15 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     _check_env_state(env_shape, num_envs)
     for name in ("truncation",):
         if name not in env_shape.info:
-            raise ValueError(f"env State.info lacks {name!r} (N,); wrap Brax envs with wrap_brax_env")
+            raise ValueError(
+                f"env State.info lacks {name!r} (N,); wrap Brax envs with wrap_brax_env"
+            )
     clash = {"train/", "loss/", "ppo/"}
     for k in env_shape.metrics:
         if any(k.startswith(c) for c in clash):
-            raise ValueError(f"env metric {k!r} clashes with trainer metric prefixes {sorted(clash)}")
+            raise ValueError(
+                f"env metric {k!r} clashes with trainer metric prefixes {sorted(clash)}"
+            )
     obs_example = jax.tree.map(lambda s: jp.zeros((1,) + s.shape[1:], s.dtype), env_shape.obs)
 
     # Partition specs: params & co replicated, everything with an env axis sharded over AXIS.
@@ -261,7 +266,9 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
             env_state, net_carry, prev_done, ep_return, ep_length = carry
             obs = env_state.obs
             net_carry, mean, _, value = networks.step(params, normalizer, net_carry, obs, prev_done)
-            action = mean + jp.exp(log_std) * jax.random.normal(key_step, mean.shape)  # ~ N(mean, std)
+            action = mean + jp.exp(log_std) * jax.random.normal(
+                key_step, mean.shape
+            )  # ~ N(mean, std)
             log_prob = net.gaussian_log_prob(action, mean, log_std)
             env_state = env.step(env_state, action)
             done = env_state.done.astype(bool)
@@ -283,9 +290,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         carry0 = (state.env_state, state.carry, state.prev_done, state.ep_return, state.ep_length)
         carry, traj = jax.lax.scan(step, carry0, jax.random.split(key, num_steps))
         env_state, net_carry, prev_done, _, _ = carry
-        _, _, _, last_value = networks.step(
-            params, normalizer, net_carry, env_state.obs, prev_done
-        )
+        _, _, _, last_value = networks.step(params, normalizer, net_carry, env_state.obs, prev_done)
         return carry, traj, last_value
 
     # ------------------------------------------------------------ update
@@ -297,7 +302,11 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         metrics = jax.lax.pmean(metrics, AXIS)
         if adaptive:
             lr = adapt_learning_rate(
-                opt_state.hyperparams["learning_rate"], metrics["ppo/kl"], desired_kl, lr_min, lr_max
+                opt_state.hyperparams["learning_rate"],
+                metrics["ppo/kl"],
+                desired_kl,
+                lr_min,
+                lr_max,
             )
             opt_state = _set_learning_rate(opt_state, lr)
         updates, opt_state = optimizer.update(grads, opt_state, params)

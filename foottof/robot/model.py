@@ -25,12 +25,17 @@ TOTAL_MASS_KG = BASE_INERTIAL[0] + 4 * sum(v[0] for v in LEG_INERTIALS.values())
 HAA_RANGE_LEFT = (-0.7854, 0.6109)
 FLEX_RANGE = (-9.4248, 9.4248)
 
-# Collision proxies (spheres only: MJX sizes the hfield patch by the bounding radius).
-# Base: spheres along the underside of the 0.894 x 0.16 x 0.256 m base box (centre z = +0.016,
-# bottom at z = -0.112): their bottoms are at the box bottom, together they span x = +-0.447.
-BASE_SPHERE_RADIUS_M = 0.09
-BASE_SPHERE_CENTRES_M = tuple((x, 0.0, -0.112 + BASE_SPHERE_RADIUS_M) for x in (-0.357, -0.1785, 0.0, 0.1785, 0.357))
-KNEE_SPHERE_RADIUS_M = 0.06  # one per knee, centred on the KFE axis (shank cylinder r = 0.071)
+# Collision proxies: spheres only. MJX collides a geom with the hfield cells inside a square patch of
+# ceil(2 * rbound / cell) + 1 vertices per side, so the cost grows with (radius / cell)^2; the radii
+# are just below multiples of 2 cm so that on a 4 cm grid the patches are 3x3 (feet), 4x4 (knees)
+# and 5x5 (base) cells.
+# Base: 4 spheres along the underside of the 0.894 x 0.16 x 0.256 m base box (centre z = +0.016,
+# bottom at z = -0.112): their bottoms touch the box bottom, together they span x = +-0.447.
+BASE_SPHERE_RADIUS_M = 0.0795
+BASE_SPHERE_CENTRES_M = tuple(
+    (x, 0.0, -0.112 + BASE_SPHERE_RADIUS_M) for x in (-0.3675, -0.1175, 0.1175, 0.3675)
+)
+KNEE_SPHERE_RADIUS_M = 0.0595  # one per knee, centred on the KFE axis (shank cylinder r = 0.071)
 
 FOOT_RADIUS_RANGE_M = (0.02, 0.05)  # valid foot_radius_m
 
@@ -40,6 +45,7 @@ DEFAULT_TUNING = {
     "joint_damping": 0.0,  # passive viscous joint damping (MuJoCo side) [N m s/rad]
     "foot_friction": 1.0,  # sliding friction coefficient of the foot spheres [-]
     "body_friction": 0.6,  # sliding friction coefficient of base and knee spheres [-]
+    "body_condim": 3,  # contact dimension of base and knee spheres: 1 frictionless | 3
     "solref_timeconst": 0.02,  # contact solref[0] time constant [s] (>= 2 * timestep)
     "solref_dampratio": 1.0,  # contact solref[1] damping ratio [-]
     "solver": "newton",  # constraint solver: newton | cg
@@ -50,7 +56,7 @@ DEFAULT_TUNING = {
     "eulerdamp": False,  # implicit damping in the Euler integrator (off: faster, no damping here)
     "timestep": constants.PHYSICS_DT_S,  # physics step [s]
 }
-_CHOICES = {"solver": ("newton", "cg"), "cone": ("pyramidal", "elliptic")}
+_CHOICES = {"solver": ("newton", "cg"), "cone": ("pyramidal", "elliptic"), "body_condim": (1, 3)}
 _SOLVER_MJCF = {"newton": "Newton", "cg": "CG"}
 
 
@@ -175,7 +181,7 @@ def make_model_xml(
       <geom contype="0" conaffinity="0" group="1" density="0" rgba="0.3 0.3 0.3 1"/>
     </default>
     <default class="body_collision">
-      <geom type="sphere" contype="1" conaffinity="0" condim="3" group="3"
+      <geom type="sphere" contype="1" conaffinity="0" condim="{int(t["body_condim"])}" group="3"
             friction="{_f(t["body_friction"])} 0.005 0.0001" rgba="0.8 0.3 0.3 0.4"/>
     </default>
     <default class="foot">

@@ -70,7 +70,8 @@ _FACE_NORMALS = ((-1.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 1.0,
                  (0.0, 0.0, -1.0), (0.0, 0.0, 1.0))
 
 
-def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int):
+def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int,
+              with_normal: bool):
     """Distance and outward unit normal of the first hit of one ray (inf if none)."""
     nrow, ncol, cell = hf.nrow, hf.ncol, hf.cell_m
     rx, ry = hf.half_extents_m
@@ -110,56 +111,63 @@ def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int):
     hk = [vert(k, r + j) for j in range(3)]
     hk1 = [vert(k + 1, r + j) for j in range(3)]
 
-    # Vertex (P, Q) relative to the ray origin, in (cells, cells, m): computed from its indices
-    # only, so a vertex shared by neighbouring cells gets bit-identical coordinates and the edge
-    # tests below are watertight (no ray slips between triangles, no tolerance needed).
-    def rel(pi, qi, h):
-        return jp.stack([pi.astype(dt) - p0, qi.astype(dt) - q0, h - o[2]], -1)
+    # Vertices V(P, Q) relative to the ray origin in (cells, cells, m), computed from their indices
+    # only: a vertex shared by neighbouring cells or strips gets bit-identical coordinates. Each
+    # grid edge a -> b is tested with the same canonical orientation everywhere (E(a, b) =
+    # D . (a x b) = (D x a) . b, from the lower to the higher index), so the inside tests of
+    # adjacent triangles are exactly complementary: watertight, no tolerance needed.
+    dz = d[2]
+    dd = dp * dp + dq * dq + dz * dz
+    heights = (hk, hk1)
+    vx = [k.astype(dt) + x - p0 for x in range(2)]
+    vy = [(r + y).astype(dt) - q0 for y in range(3)]
+    vz = [[heights[x][y] - o[2] for y in range(3)] for x in range(2)]
+    # cr = D x V and tv = (V . D) / (D . D) per vertex, indexed [x][y].
+    cr = [[(dq * vz[x][y] - dz * vy[y], dz * vx[x] - dp * vz[x][y], dp * vy[y] - dq * vx[x])
+           for y in range(3)] for x in range(2)]
+    tv = [[(vx[x] * dp + vy[y] * dq + vz[x][y] * dz) / dd for y in range(3)] for x in range(2)]
 
-    ray = jp.stack([dp, dq, d[2]])
+    def edge(a, b):  # a = (x, y) canonical first vertex, b = (x, y) second vertex
+        c = cr[a[0]][a[1]]
+        return c[0] * vx[b[0]] + c[1] * vy[b[1]] + c[2] * vz[b[0]][b[1]]
 
-    def edge(a, b):  # signed volume ray . (a x b): which side of edge a->b the ray passes
-        return jp.einsum("i,...i->...", ray, jp.cross(a, b))
-
-    verts = [[rel(k + x, r + y, (hk, hk1)[x][y]) for y in range(3)] for x in range(2)]
-    best_t = jp.full((n_strips,), jp.inf, dt)
-    best_g = jp.zeros((n_strips, 2), dt)  # (dz/dp, dz/dq) per cell [m per cell]
-    for j in range(2):  # cells (k, r) and (k, r + 1)
+    e_p = [edge((0, y), (1, y)) for y in range(3)]  # edges along p at rows r + y
+    ts = []
+    for j in range(2):  # cells (k, r + j): triangles A = (00, 10, 11) and B = (00, 11, 01)
         rr = r + j
         cell_ok = strip_ok & (k >= 0) & (k <= n_p - 2) & (rr >= 0) & (rr <= n_q - 2)
-        v00, v01, v10, v11 = verts[0][j], verts[0][j + 1], verts[1][j], verts[1][j + 1]
-        e_diag = edge(v00, v11)  # shared diagonal (0,0)-(1,1)
-        # Triangle A = (00, 10, 11): dz/dp = h10 - h00, dz/dq = h11 - h10.
-        # Triangle B = (00, 11, 01): dz/dp = h11 - h01, dz/dq = h01 - h00.
-        tris = (
-            ((v00, v10, v11), (edge(v00, v10), edge(v10, v11), -e_diag),
-             (v10[..., 2] - v00[..., 2], v11[..., 2] - v10[..., 2])),
-            ((v00, v11, v01), (e_diag, edge(v11, v01), edge(v01, v00)),
-             (v11[..., 2] - v01[..., 2], v01[..., 2] - v00[..., 2])),
-        )
-        for (a, b, c), (w_ab, w_bc, w_ca), (gp, gq) in tris:
-            same_side = ((w_ab >= 0) & (w_bc >= 0) & (w_ca >= 0)) | (
-                (w_ab <= 0) & (w_bc <= 0) & (w_ca <= 0)
-            )
+        e_left = edge((0, j), (0, j + 1))
+        e_right = edge((1, j), (1, j + 1))
+        e_diag = edge((0, j), (1, j + 1))
+        t00, t10, t11, t01 = tv[0][j], tv[1][j], tv[1][j + 1], tv[0][j + 1]
+        for (w_ab, w_bc, w_ca), (ta, tb, tc) in (
+            ((e_p[j], e_right, -e_diag), (t00, t10, t11)),
+            ((e_diag, -e_p[j + 1], -e_left), (t00, t11, t01)),
+        ):
+            pos = (w_ab >= 0) & (w_bc >= 0) & (w_ca >= 0)
+            neg = (w_ab <= 0) & (w_bc <= 0) & (w_ca <= 0)
             w_sum = w_ab + w_bc + w_ca
-            ok = same_side & (w_sum != 0.0)
-            w_safe = jp.where(ok, w_sum, 1.0)
-            hit_pt = (w_bc[..., None] * a + w_ca[..., None] * b + w_ab[..., None] * c) / w_safe[
-                ..., None
-            ]
-            t = jp.einsum("...i,i->...", hit_pt, ray) / jp.dot(ray, ray)
-            hit = cell_ok & ok & (t >= 0.0) & (t <= max_range_m)
-            t = jp.where(hit, t, jp.inf)
-            closer = t < best_t
-            best_t = jp.where(closer, t, best_t)
-            best_g = jp.where(closer[:, None], jp.stack([gp, gq], -1), best_g)
-
-    i_best = jp.argmin(best_t)
-    t_tri = best_t[i_best]
-    gp, gq = best_g[i_best, 0], best_g[i_best, 1]
-    dzdx, dzdy = jp.where(swap, gq, gp) / cell, jp.where(swap, gp, gq) / cell
-    n_tri = jp.stack([-dzdx, -dzdy, jp.ones((), dt)])
-    n_tri = n_tri / jp.linalg.norm(n_tri)
+            ok = cell_ok & (pos | neg) & (w_sum != 0.0)
+            # Hit point = barycentric mix (weights w_bc, w_ca, w_ab) -> its ray parameter.
+            t = (w_bc * ta + w_ca * tb + w_ab * tc) / jp.where(ok, w_sum, 1.0)
+            ts.append(jp.where(ok & (t >= 0.0) & (t <= max_range_m), t, jp.inf))
+    t_all = jp.stack(ts, -1)  # (n_strips, 4): cell r (A, B), cell r + 1 (A, B)
+    i_best = jp.argmin(t_all.reshape(-1))
+    t_tri = t_all.reshape(-1)[i_best]
+    if with_normal:
+        si, ci = i_best // 4, i_best % 4
+        j, tri = ci // 2, ci % 2
+        h00 = jp.where(j == 0, hk[0][si], hk[1][si])
+        h01 = jp.where(j == 0, hk[1][si], hk[2][si])
+        h10 = jp.where(j == 0, hk1[0][si], hk1[1][si])
+        h11 = jp.where(j == 0, hk1[1][si], hk1[2][si])
+        gp = jp.where(tri == 0, h10 - h00, h11 - h01)  # dz/dp [m per cell]
+        gq = jp.where(tri == 0, h11 - h10, h01 - h00)  # dz/dq [m per cell]
+        dzdx, dzdy = jp.where(swap, gq, gp) / cell, jp.where(swap, gp, gq) / cell
+        n_tri = jp.stack([-dzdx, -dzdy, jp.ones((), dt)])
+        n_tri = n_tri / jp.linalg.norm(n_tri)
+    else:
+        n_tri = jp.zeros((3,), dt)
 
     # --- MuJoCo's boxes: the top box gates the surface, its sides are walls, plus the base box.
     top = _box_faces((xlo, ylo, zf), (xhi, yhi, ztop), o, d)
@@ -195,7 +203,7 @@ def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int):
     return t_hit, normals[i_c]
 
 
-def _cast(hfield: Heightfield, origins, directions, max_range):
+def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool):
     r = _check_range(max_range)
     origins = jp.asarray(origins)
     directions = jp.asarray(directions)
@@ -211,7 +219,7 @@ def _cast(hfield: Heightfield, origins, directions, max_range):
     unit = directions / jp.where(norm > 0.0, norm, 1.0)
     h_flat = hfield.clipped().heights.astype(dt).reshape(-1)
     n_strips = num_strips(hfield, r)
-    t, n = jax.vmap(lambda o, d: _cast_one(h_flat, hfield, o, d, r, n_strips))(origins, unit)
+    t, n = jax.vmap(lambda o, d: _cast_one(h_flat, hfield, o, d, r, n_strips, with_normal))(origins, unit)
     hit = jp.isfinite(t) & (norm[:, 0] > 0.0)
     return jp.where(hit, t, MISS), jp.where(hit[:, None], n, 0.0)
 
@@ -229,11 +237,6 @@ def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) 
     2 cells per strip), so thin corners cannot be skipped. Assumes the hfield geom is not
     rotated (the ``Heightfield`` convention).
 
-    One difference from mj_ray (MuJoCo 3.x/4.0 ``mj_rayHfield``): for the walls normal to x,
-    MuJoCo indexes the edge profile with ``nrow`` as the row stride, which is only correct for
-    square hfields; we use the correct stride ``ncol``. Results agree whenever nrow == ncol or the
-    ray does not hit those two walls.
-
     jit- and vmap-able; ``max_range`` is static (it sets the number of strips,
     ``num_strips(hfield, max_range)``; cost is linear in it).
 
@@ -247,7 +250,7 @@ def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) 
       (N,) distance [m] along the normalized direction to the first hit, or ``MISS`` (-1.0)
       for a miss, a hit beyond ``max_range`` or a zero direction.
     """
-    return _cast(hfield, origins, directions, max_range)[0]
+    return _cast(hfield, origins, directions, max_range, False)[0]
 
 
 def ray_heightfield_normal(
@@ -263,4 +266,4 @@ def ray_heightfield_normal(
       distance: (N,) [m] or ``MISS`` (-1.0).
       normal: (N, 3) unit world normal at the hit; zeros for a miss.
     """
-    return _cast(hfield, origins, directions, max_range)
+    return _cast(hfield, origins, directions, max_range, True)

@@ -91,9 +91,9 @@ def update_levels(
             f"down_progress_frac={down_progress_frac!r} outside the valid range [0, 1]"
         )
     level = jp.asarray(level, jp.int32)
-    up = reached_goal
-    down = ~reached_goal & (progress < down_progress_frac)
+    up = jp.asarray(reached_goal, bool)
+    down = ~up & (jp.asarray(progress) < down_progress_frac)
     new = level + up.astype(jp.int32) - down.astype(jp.int32)
     random_level = jax.random.randint(key, level.shape, 0, num_levels, dtype=jp.int32)
     new = jp.where(new >= num_levels, random_level, jp.maximum(new, 0))
-    return jp.where(done, new, level)
+    return jp.where(jp.asarray(done, bool), new, level)

@@ -216,8 +216,9 @@ def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     top = jax.random.uniform(k_z, (nky, nkx), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
     jx = jax.random.uniform(k_jx, (nky, nkx), minval=-0.25, maxval=0.25) * gap  # centre jitter
     jy = jax.random.uniform(k_jy, (nky, nkx), minval=-0.25, maxval=0.25) * gap
-    fx = jax.random.uniform(k_fx, (nky, nkx), minval=0.9, maxval=1.0)  # size factor ~ U(0.9, 1)
-    fy = jax.random.uniform(k_fy, (nky, nkx), minval=0.9, maxval=1.0)
+    f_lo = _lerp(0.97, 0.9, d)  # size factor ~ U(f_lo, 1)
+    fx = jax.random.uniform(k_fx, (nky, nkx), minval=f_lo, maxval=1.0)
+    fy = jax.random.uniform(k_fy, (nky, nkx), minval=f_lo, maxval=1.0)
     phase_y = jax.random.uniform(k_ph, (), maxval=1.0) * pitch  # grid phase across y
     kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
     ky, ly = _cell(y - phase_y, pitch, nky)
@@ -244,7 +245,7 @@ def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
         top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
         jx = jax.random.uniform(k_jx, (n,), minval=-0.2, maxval=0.2) * gap
         jy = jax.random.uniform(k_jy, (n,), minval=-1.0, maxval=1.0) * lateral
-        f = jax.random.uniform(k_f, (n,), minval=0.9, maxval=1.0)  # size factor ~ U(0.9, 1)
+        f = jax.random.uniform(k_f, (n,), minval=_lerp(0.97, 0.9, d))  # size ~ U(f_lo, 1)
         phase = jax.random.uniform(k_ph, (), maxval=0.5) * pitch  # row stagger ~ U(0, pitch/2)
         k, lx = _cell(x - spec.course_x0_m - gap / 2 - phase, pitch, n)
         yc = y_mid + side * TWO_ROW_HALF_SPACING_M + jy[k]
@@ -289,7 +290,7 @@ def _platform_gap(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
 
 def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     """Rows of stones across y, each row randomly shifted; mixed sizes, bricks and high stones."""
-    size = _lerp(0.50, 0.18, d)  # largest stone top size; each ~ U(0.75, 1) * size [m]
+    size = _lerp(0.50, 0.18, d)  # largest stone top size; each ~ U(f_lo, 1) * size [m]
     gap = _lerp(0.05, 0.40, d)  # nominal gap between stones, along x and y [m]
     dz = _lerp(0.0, 0.20, d)  # low bricks sit dz lower, high stones dz higher [m]
     keep = _lerp(1.0, 0.85, d)  # probability that a stone is present [-]
@@ -304,8 +305,9 @@ def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array
     top = jp.where(kind == 1, -dz, jp.where(kind == 2, dz, regular))
     jx = jax.random.uniform(k_jx, (nky, nkx), minval=-0.25, maxval=0.25) * gap
     jy = jax.random.uniform(k_jy, (nky, nkx), minval=-0.25, maxval=0.25) * gap
-    fx = jax.random.uniform(k_fx, (nky, nkx), minval=0.75, maxval=1.0)
-    fy = jax.random.uniform(k_fy, (nky, nkx), minval=0.75, maxval=1.0)
+    f_lo = _lerp(0.95, 0.75, d)  # size factor ~ U(f_lo, 1)
+    fx = jax.random.uniform(k_fx, (nky, nkx), minval=f_lo, maxval=1.0)
+    fy = jax.random.uniform(k_fy, (nky, nkx), minval=f_lo, maxval=1.0)
     present = jax.random.uniform(k_keep, (nky, nkx)) < keep
     phase_y = jax.random.uniform(k_ph, (nkx,), maxval=1.0) * pitch  # per-row shift across y
     kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)

@@ -1,0 +1,157 @@
+"""Foot-reading sources of the env: foot ray casters (tof) or emulated (mock_ideal, mock_aggre)."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from flax import struct
+
+from foottof import constants
+from foottof.eval import elevation_map as em
+from foottof.eval import sources as mock
+from foottof.robot import kinematics
+from foottof.sensors import degradation as deg
+from foottof.sensors import tof
+from foottof.sensors.noise_model import load_model
+
+SOURCES = mock.SOURCES  # ("tof", "mock_ideal", "mock_aggre")
+
+
+@struct.dataclass
+class Measurements:
+    """What the robot measures of itself at a control step (what the mocks and the actor use).
+
+    Attributes:
+      q: (12,) measured joint positions [rad] (noise and any static offset included).
+      lin_vel: (3,) estimated base linear velocity, base frame [m/s] (odometry noise included).
+      ang_vel: (3,) estimated base angular velocity, base frame [rad/s].
+    """
+
+    q: jax.Array
+    lin_vel: jax.Array
+    ang_vel: jax.Array
+
+
+@struct.dataclass
+class Sense:
+    """Foot readings for the observation.
+
+    Attributes:
+      distance: (F, Z) delivered readings [m] (held at 60 Hz, delayed, degraded; 0 = dropped).
+      valid: (F, Z) float validity flags of the delivered readings.
+      age_s: (F,) age of the delivered frames [s].
+      true_distance: (F, Z) noise-free ``tof`` readings at this step [m] (critic).
+      true_valid: (F, Z) float validity of the noise-free readings.
+    """
+
+    distance: jax.Array
+    valid: jax.Array
+    age_s: jax.Array
+    true_distance: jax.Array
+    true_valid: jax.Array
+
+
+@struct.dataclass
+class SensingState:
+    """Per-env sensing state: the ToF timing/degradation pipeline and, for mock_aggre, the map."""
+
+    tof: deg.ToFState
+    emap: em.ElevationMapState | None = None
+
+
+class Sensing:
+    """Foot readings of one env from the configured source, through the sensor pipeline.
+
+    Every source goes through the same VL53L5CX pipeline (60 Hz sample-and-hold, k-step delay,
+    per-episode degradation with the stage's bounds from ``cfg.noise``), so the policy sees the
+    same observation layout; only where the noise-free frame comes from differs:
+    ``tof`` casts the foot rays on the terrain from the true sensor poses (physics model, incl.
+    any shank-length change); ``mock_ideal`` / ``mock_aggre`` cast the same rays into an ideal
+    height scan / an aggregated elevation map from poses given by the *measured* joints through
+    the *nominal* kinematics (foottof.eval.sources).
+    """
+
+    def __init__(self, cfg, source: str, hfield, shank_scale: float):
+        if source not in SOURCES:
+            raise ValueError(f"unknown source {source!r}; valid sources: {list(SOURCES)}")
+        self.source = source
+        self.hfield = hfield
+        self.shank_scale = float(shank_scale)
+        self.spec = tof.make_spec(cfg.sensor, cfg.noise)
+        self.bounds = deg.bounds_from_config(cfg.noise, int(cfg.stage), self.spec)
+        self.model = load_model(cfg.noise.model_path or None)
+        sites = tuple(cfg.sensor.sites)
+        bad = [s for s in sites if s not in constants.TOF_SITES]
+        if bad:
+            raise ValueError(f"sensor.sites {bad} unknown; valid sites: {list(constants.TOF_SITES)}")
+        self.feet = tuple(constants.TOF_SITES.index(s) for s in sites)
+        self._feet_idx = np.asarray(self.feet, np.int32)
+        self.dt = constants.CONTROL_DT_S
+
+    @property
+    def num_sensors(self) -> int:
+        return self.spec.num_sensors
+
+    @property
+    def num_zones(self) -> int:
+        return self.spec.num_zones
+
+    def true_reading(self, d) -> tof.ToFReading:
+        """Noise-free frame of the real foot sensors (true poses of the physics model)."""
+        fk = kinematics.world_foot_kinematics(d.qpos, self.shank_scale)
+        pos = fk.tof_pos[self._feet_idx]
+        rot = fk.tof_rot[self._feet_idx]
+        return tof.sense(self.spec, self.hfield, pos, rot)
+
+    def _source_reading(self, d, meas: Measurements, emap, true):
+        base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
+        if self.source == "tof":
+            return true
+        if self.source == "mock_ideal":
+            return mock.mock_ideal_readings(
+                self.spec, self.hfield, base_pos, base_quat, meas.q, self.feet
+            )
+        return mock.mock_aggre_readings(self.spec, emap, base_quat, meas.q, self.feet)
+
+    def _sense(self, obs: deg.ToFObs, true: tof.ToFReading) -> Sense:
+        return Sense(
+            distance=obs.distance_m,
+            valid=obs.valid.astype(jp.float32),
+            age_s=obs.age_s,
+            true_distance=true.distance_m,
+            true_valid=true.valid.astype(jp.float32),
+        )
+
+    def reset(self, key, d, meas: Measurements) -> tuple[SensingState, Sense]:
+        """Sensing state of a fresh episode (draws degradation levels, delay, frame phases)."""
+        emap = None
+        if self.source == "mock_aggre":
+            emap = em.aggre_init(self.hfield, d.qpos[0:3], d.qpos[3:7])
+        true = self.true_reading(d)
+        reading = self._source_reading(d, meas, emap, true)
+        tstate, obs = deg.reset(self.spec, self.bounds, self.model, key, reading)
+        return SensingState(tof=tstate, emap=emap), self._sense(obs, true)
+
+    def step(self, state: SensingState, key, d, meas: Measurements, done) -> tuple[SensingState, Sense]:
+        """Advance one control step; where ``done`` the pipeline restarts (the env auto-reset).
+
+        ``d`` is the physics state *after* any auto-reset, so one ray cast serves both cases.
+        """
+        key_step, key_reset = jax.random.split(key)
+        base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
+        emap = state.emap
+        if self.source == "mock_aggre":
+            moved = em.aggre_update(
+                state.emap, self.hfield, base_pos, base_quat, meas.lin_vel, meas.ang_vel, self.dt
+            )
+            fresh = em.aggre_init(self.hfield, base_pos, base_quat)
+            emap = jax.tree.map(lambda a, b: jp.where(done, a, b), fresh, moved)
+        true = self.true_reading(d)
+        reading = self._source_reading(d, meas, emap, true)
+        t_step, o_step = deg.step(self.spec, self.model, state.tof, reading, key_step)
+        t_reset, o_reset = deg.reset(self.spec, self.bounds, self.model, key_reset, reading)
+        sel = lambda a, b: jax.tree.map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
+        return SensingState(tof=sel(t_reset, t_step), emap=emap), self._sense(
+            sel(o_reset, o_step), true
+        )

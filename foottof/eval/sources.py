@@ -1,0 +1,143 @@
+"""Foot-reading sources of the robustness evaluation: ``tof`` and the base-centric mocks."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+
+from foottof import constants
+from foottof.eval import elevation_map as em
+from foottof.robot.kinematics import forward_kinematics
+from foottof.sensors import tof
+from foottof.terrain.heightfield import Heightfield
+
+# tof: rays cast from the simulated foot sensor sites on the terrain (foottof.sensors.tof.sense).
+# mock_ideal: the same rays cast on the ideal 5 m x 5 m, 5 cm height scan around the base, from
+#   sensor poses computed from the measured joints through the nominal kinematics.
+# mock_aggre: as mock_ideal, on the camera-aggregated elevation map (elevation_map.aggre_*).
+SOURCES = ("tof", "mock_ideal", "mock_aggre")
+
+
+def check_source(name: str) -> None:
+    """ValueError naming the choices if ``name`` is not a foot-reading source."""
+    if name not in SOURCES:
+        raise ValueError(f"foot-reading source must be one of {SOURCES}, got {name!r}")
+
+
+def _check_sensor_feet(spec: tof.ToFSpec, sensor_feet) -> tuple[int, ...]:
+    feet = tuple(range(constants.NUM_FEET)) if sensor_feet is None else tuple(sensor_feet)
+    if len(feet) != spec.num_sensors or any(
+        not 0 <= f < constants.NUM_FEET for f in feet
+    ):
+        raise ValueError(
+            f"sensor_feet={sensor_feet!r} must give one foot index in [0, {constants.NUM_FEET}) "
+            f"(order {constants.FEET}) per sensor (num_sensors={spec.num_sensors})"
+        )
+    return feet
+
+
+def sensor_sites_in_scan_frame(
+    base_quat: jax.Array,
+    q_measured: jax.Array,
+    sensor_feet: tuple[int, ...] = tuple(range(constants.NUM_FEET)),
+) -> tuple[jax.Array, jax.Array]:
+    """ToF site poses the robot *believes* in, in the scan frame (yaw frame, origin at the base).
+
+    Nominal kinematics (shank_scale = 1, nominal ToF tilt) of the measured joints give the site
+    poses in the base frame; the known roll and pitch (IMU) rotate them into the gravity-aligned
+    yaw frame. Joint offsets and unmodelled shank lengths therefore move the emulated sensors.
+
+    Args:
+      base_quat: (4,) base orientation (w, x, y, z); only roll and pitch are used.
+      q_measured: (12,) measured joint positions [rad] (constants.JOINT_NAMES order).
+      sensor_feet: static foot index (constants.FEET order) of each sensor's site.
+
+    Returns:
+      site_pos (F, 3) [m] relative to the base, site_rot (F, 3, 3) axes as columns.
+    """
+    fk = forward_kinematics(q_measured, shank_scale=1.0, tof_tilt_deg=constants.TOF_TILT_DEG)
+    tilt = em.tilt_rotation(base_quat).astype(fk.tof_pos.dtype)
+    idx = jp.asarray(sensor_feet)
+    pos = jp.einsum("ij,fj->fi", tilt, fk.tof_pos[idx])
+    rot = tilt @ fk.tof_rot[idx]
+    return pos, rot
+
+
+def readings_from_scan(
+    spec: tof.ToFSpec,
+    scan: jax.Array,
+    base_quat: jax.Array,
+    q_measured: jax.Array,
+    sensor_feet: tuple[int, ...] | None = None,
+) -> tof.ToFReading:
+    """Emulate the foot ToF frame by casting the sensor's rays into a robot-centric height scan.
+
+    Uses exactly the ``tof`` source's pipeline (:func:`foottof.sensors.tof.sense`: the same 41
+    rays per sensor, zone minimum, quantization and clipping, extra tilts and offsets of ``spec``)
+    on ``scan`` wrapped as a Heightfield (elevation_map.scan_heightfield); only the surface and
+    the sensor poses differ. Cells the map has never seen hold UNKNOWN_HEIGHT_M (4 m below the
+    base), so rays over them get no return: distance = max range, valid = False.
+
+    Args:
+      spec: ToF sensor spec (static).
+      scan: (101, 101) heights relative to the base z [m] in the scan frame.
+      base_quat: (4,) base orientation (w, x, y, z); roll and pitch are used.
+      q_measured: (12,) measured joint positions [rad].
+      sensor_feet: static foot index per sensor; default sensor f on foot f (needs 4 sensors).
+
+    Returns:
+      ToFReading with (F, Z) distance_m, valid and incidence_rad.
+    """
+    feet = _check_sensor_feet(spec, sensor_feet)
+    pos, rot = sensor_sites_in_scan_frame(base_quat, q_measured, feet)
+    return tof.sense(spec, em.scan_heightfield(scan), pos, rot)
+
+
+def mock_ideal_readings(
+    spec: tof.ToFSpec,
+    hfield: Heightfield,
+    base_pos: jax.Array,
+    base_quat: jax.Array,
+    q_measured: jax.Array,
+    sensor_feet: tuple[int, ...] | None = None,
+) -> tof.ToFReading:
+    """``mock_ideal`` source: foot readings emulated from the ideal height scan around the base.
+
+    Args:
+      spec: ToF sensor spec (static).
+      hfield: world terrain.
+      base_pos: (3,) true world base position [m] (the scan is centred on it).
+      base_quat: (4,) true base orientation (w, x, y, z).
+      q_measured: (12,) measured joint positions [rad] (with any static offset).
+      sensor_feet: static foot index per sensor (default: one per foot).
+
+    Returns:
+      ToFReading with (F, Z) arrays, same layout as the ``tof`` source.
+    """
+    scan = em.height_scan(hfield, base_pos, em.yaw_from_quat(base_quat))
+    return readings_from_scan(spec, scan, base_quat, q_measured, sensor_feet)
+
+
+def mock_aggre_readings(
+    spec: tof.ToFSpec,
+    state: em.ElevationMapState,
+    base_quat: jax.Array,
+    q_measured: jax.Array,
+    sensor_feet: tuple[int, ...] | None = None,
+) -> tof.ToFReading:
+    """``mock_aggre`` source: foot readings emulated from the aggregated elevation map.
+
+    Call after :func:`elevation_map.aggre_update` of this step (``state.scan`` is the map in the
+    current base frame as the robot believes it).
+
+    Args:
+      spec: ToF sensor spec (static).
+      state: elevation map of this env.
+      base_quat: (4,) base orientation (w, x, y, z); roll and pitch are used.
+      q_measured: (12,) measured joint positions [rad].
+      sensor_feet: static foot index per sensor (default: one per foot).
+
+    Returns:
+      ToFReading with (F, Z) arrays, same layout as the ``tof`` source.
+    """
+    return readings_from_scan(spec, state.scan, base_quat, q_measured, sensor_feet)

@@ -1,0 +1,46 @@
+"""Foot ToF sensing: heightfield ray caster, VL53L5CX zone model, degradation and frame timing."""
+
+from foottof.sensors.degradation import (
+    DegradationBounds,
+    DegradationLevels,
+    ToFObs,
+    ToFState,
+    bounds_from_config,
+    degrade,
+    init,
+    reset,
+    sample_levels,
+    step,
+    zero_levels,
+)
+from foottof.sensors.noise_model import NoiseModel, load_model, missing_prob, noise_std
+from foottof.sensors.raycast import MISS, num_strips, ray_heightfield, ray_heightfield_normal
+from foottof.sensors.tof import ToFReading, ToFSpec, make_spec, sense, sensor_frames, site_ids
+
+__all__ = [
+    "MISS",
+    "DegradationBounds",
+    "DegradationLevels",
+    "NoiseModel",
+    "ToFObs",
+    "ToFReading",
+    "ToFSpec",
+    "ToFState",
+    "bounds_from_config",
+    "degrade",
+    "init",
+    "load_model",
+    "make_spec",
+    "missing_prob",
+    "noise_std",
+    "num_strips",
+    "ray_heightfield",
+    "ray_heightfield_normal",
+    "reset",
+    "sample_levels",
+    "sense",
+    "sensor_frames",
+    "site_ids",
+    "step",
+    "zero_levels",
+]

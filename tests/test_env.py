@@ -1,0 +1,265 @@
+"""Tests of the goal-reaching ToF environment: shapes, NaN-free rollouts, terminations, rewards."""
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+
+from configs import smoke
+from foottof import constants
+from foottof.envs import make_env
+from foottof.envs import rewards as rw
+from foottof.terrain import TERRAIN_TYPES
+
+NUM_ENVS = len(TERRAIN_TYPES)  # one env per column: every terrain type is covered
+
+
+def _cfg():
+    cfg = smoke.get_config()
+    cfg.stage = 2  # all nine types
+    cfg.terrain.num_cols = len(TERRAIN_TYPES)
+    cfg.terrain.num_levels = 2
+    cfg.terrain.init_level_max = 1
+    return cfg
+
+
+@pytest.fixture(scope="module")
+def env():
+    return make_env(_cfg())
+
+
+@pytest.fixture(scope="module")
+def fns(env):
+    return jax.jit(jax.vmap(env.reset)), jax.jit(jax.vmap(env.step))
+
+
+def _on_columns(env, state):
+    """Put env i on column i (level 0) by re-resetting with explicit tiles."""
+    keys = jax.random.split(jax.random.PRNGKey(7), NUM_ENVS)
+    cols = jp.arange(NUM_ENVS) % env.tmap.num_cols
+    return jax.jit(jax.vmap(env._reset_episode))(keys, jp.zeros(NUM_ENVS, jp.int32), cols)
+
+
+def _with(state, env_index, **task_updates):
+    """Copy of a batched state with TaskState fields of one env replaced."""
+    task = state.info["task"]
+    new = {}
+    for k, v in task_updates.items():
+        new[k] = getattr(task, k).at[env_index].set(v)
+    info = dict(state.info)
+    info["task"] = task.replace(**new)
+    return state.replace(info=info)
+
+
+def test_shapes_and_no_nan_on_every_terrain(env, fns):
+    reset, step = fns
+    state = _on_columns(env, reset(jax.random.split(jax.random.PRNGKey(0), NUM_ENVS)))
+    sizes = env.observation_size
+    assert state.obs["state"].shape == (NUM_ENVS, sizes["state"])
+    assert state.obs["privileged_state"].shape == (NUM_ENVS, sizes["privileged_state"])
+    cols_seen = set(np.asarray(state.info["task"].col).tolist())
+    types_seen = {TERRAIN_TYPES[int(env.tmap.col_type[c])] for c in cols_seen}
+    assert types_seen == set(TERRAIN_TYPES)
+    key = jax.random.PRNGKey(1)
+    dones = 0
+    for _ in range(500):
+        key, k = jax.random.split(key)
+        action = jax.random.uniform(k, (NUM_ENVS, 12), minval=-1.0, maxval=1.0)
+        state = step(state, action)
+        for leaf in (state.obs["state"], state.obs["privileged_state"], state.reward):
+            assert np.all(np.isfinite(np.asarray(leaf)))
+        dones += int(np.sum(np.asarray(state.done)))
+    assert state.obs["state"].shape == (NUM_ENVS, sizes["state"])
+    assert dones > 0  # random actions end episodes (falls) and they auto-reset
+
+
+def _gap_xy(env):
+    """World xy of a pit vertex (height at the floor) inside a platform_gap tile, level 0."""
+    col = int(np.where(np.asarray(env.tmap.col_type) == TERRAIN_TYPES.index("platform_gap"))[0][0])
+    h = np.asarray(env.hfield.heights)
+    hf = env.hfield
+    tile = env.tmap.spec.tile
+    x_lo, x_hi = col * tile.length_m, (col + 1) * tile.length_m
+    y_mid = 0.5 * tile.width_m
+    i = int(round((y_mid - hf.y0_m) / hf.cell_m))
+    for j in range(h.shape[1]):
+        x = hf.x0_m + j * hf.cell_m
+        if x_lo + 1.7 < x < x_hi and h[i, j] <= hf.z_floor_m + 1e-6:
+            # widest pit run starting here; use its middle
+            k = j
+            while h[i, k] <= hf.z_floor_m + 1e-6:
+                k += 1
+            return col, (hf.x0_m + 0.5 * (j + k - 1) * hf.cell_m, y_mid)
+    raise AssertionError("no gap found in the platform_gap tile")
+
+
+def test_robot_dropped_into_gap_terminates(env, fns):
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(3), NUM_ENVS))
+    col, (x, y) = _gap_xy(env)
+    qpos = state.pipeline_state.qpos
+    # Env 0 hovers over the pit at stance height above z = 0: nothing below it for ~1 m.
+    qpos = qpos.at[0, 0:3].set(jp.array([x, y, env._stand_height + 0.05]))
+    qpos = qpos.at[0, 3:7].set(jp.array([1.0, 0.0, 0.0, 0.0]))
+    state = state.replace(pipeline_state=state.pipeline_state.replace(qpos=qpos))
+    failed = False
+    for _ in range(40):  # 0.8 s of free fall is enough to drop > 1 m
+        state = step(state, jp.zeros((NUM_ENVS, 12)))
+        if float(state.metrics["episode/failed"][0]) > 0:
+            failed = True
+            break
+    assert failed
+    assert float(state.done[0]) == 1.0
+    assert float(state.info["truncation"][0]) == 0.0
+
+
+@pytest.mark.parametrize("offset_m,expect", [(0.4, True), (0.6, False)])
+def test_sparse_reward_at_timeout(env, fns, offset_m, expect):
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(4), NUM_ENVS))
+    task = state.info["task"]
+    base_xy = state.pipeline_state.qpos[0, 0:2]
+    goal = base_xy + jp.array([offset_m, 0.0])
+    level0 = int(task.level[0])
+    state = _with(state, 0, goal=goal, step=env.episode_steps - 1)
+    state = step(state, jp.zeros((NUM_ENVS, 12)))
+    assert float(state.info["truncation"][0]) == 1.0
+    assert float(state.done[0]) == 1.0
+    reach = float(state.metrics["reward/reach"][0])
+    success = float(state.metrics["episode/success"][0])
+    if expect:
+        assert reach == pytest.approx(float(_cfg().reward.scales.reach))
+        assert success == 1.0
+        # curriculum: a success moves the env up a level (or to a random one from the top)
+        new_level = int(state.info["task"].level[0])
+        if level0 < env.tmap.num_levels - 1:
+            assert new_level == level0 + 1
+    else:
+        assert reach == 0.0
+        assert success == 0.0
+        # far from the goal (progress < 0.5) -> moves down (not below 0)
+        assert int(state.info["task"].level[0]) == max(level0 - 1, 0)
+
+
+def test_auto_reset_restores_valid_state_and_leaves_others(env, fns):
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(5), NUM_ENVS))
+    state = step(state, jp.zeros((NUM_ENVS, 12)))
+    forced = _with(state, 0, step=env.episode_steps - 1)
+    a = step(forced, jp.zeros((NUM_ENVS, 12)))
+    b = step(state, jp.zeros((NUM_ENVS, 12)))
+    # env 0 restarted: step counter 0, standing pose at its spawn, zero velocity, finite obs.
+    assert int(a.info["task"].step[0]) == 0
+    spawn = np.asarray(a.info["task"].spawn[0])
+    q0 = np.asarray(a.pipeline_state.qpos[0])
+    np.testing.assert_allclose(q0[0:2], spawn[0:2], atol=1e-5)
+    np.testing.assert_allclose(np.asarray(a.pipeline_state.qvel[0]), 0.0)
+    assert np.all(np.isfinite(np.asarray(a.obs["state"][0])))
+    # every other env is exactly what it would have been without the forced reset.
+    for leaf_a, leaf_b in zip(
+        jax.tree.leaves((a.pipeline_state.qpos, a.obs, a.reward)),
+        jax.tree.leaves((b.pipeline_state.qpos, b.obs, b.reward)),
+        strict=True,
+    ):
+        np.testing.assert_array_equal(np.asarray(leaf_a)[1:], np.asarray(leaf_b)[1:])
+
+
+def test_same_key_same_trajectory(env, fns):
+    reset, step = fns
+    keys = jax.random.split(jax.random.PRNGKey(6), NUM_ENVS)
+    outs = []
+    for _ in range(2):
+        s = reset(keys)
+        for t in range(5):
+            s = step(s, jp.full((NUM_ENVS, 12), 0.1 * t))
+        outs.append(np.asarray(s.obs["state"]))
+    np.testing.assert_array_equal(outs[0], outs[1])
+
+
+# ---------------------------------------------------------------------------------------------
+# Reward terms on constructed states (no physics).
+def _inputs(**kw):
+    base = dict(
+        base_pos=jp.array([0.0, 0.0, 0.6]),
+        base_lin_vel=jp.zeros(3),
+        goal_xy=jp.array([3.0, 4.0]),
+        projected_gravity=jp.array([0.0, 0.0, -1.0]),
+        torques=jp.zeros(12),
+        qvel=jp.zeros(12),
+        last_qvel=jp.zeros(12),
+        action=jp.zeros(12),
+        last_action=jp.zeros(12),
+        foot_vel=jp.zeros((4, 3)),
+        foot_contact=jp.ones(4),
+        q=jp.asarray(constants.DEFAULT_POSE),
+        default_q=jp.asarray(constants.DEFAULT_POSE),
+        time_s=jp.asarray(5.0),
+        failed=jp.asarray(0.0),
+        truncated=jp.asarray(0.0),
+    )
+    base.update(kw)
+    return rw.RewardInputs(**base)
+
+
+def _terms(**kw):
+    return {k: float(v) for k, v in rw.compute_terms(_inputs(**kw), _cfg().reward, 0.02).items()}
+
+
+def test_reward_terms_hand_checked():
+    rcfg = _cfg().reward
+    # Guidance: goal at (3, 4) -> direction (0.6, 0.8); v = (1, 0) -> 0.6 m/s toward the goal.
+    assert _terms(base_lin_vel=jp.array([1.0, 0.0, 0.0]))["guidance"] == pytest.approx(0.6)
+    # ... clipped at guidance_max_speed_ms (1.0): v = (3, 4) -> 5 m/s toward -> 1.0
+    assert _terms(base_lin_vel=jp.array([3.0, 4.0, 0.0]))["guidance"] == pytest.approx(1.0)
+    # Torques: 12 joints at 2 N m -> 12 * 4 = 48.
+    assert _terms(torques=jp.full(12, 2.0))["torques"] == pytest.approx(48.0)
+    # Joint acc: one joint 0.1 rad/s faster over 0.02 s -> (5 rad/s^2)^2 = 25.
+    assert _terms(qvel=jp.zeros(12).at[3].set(0.1))["joint_acc"] == pytest.approx(25.0)
+    # Action rate: (0.5 - 0)^2 + (0 - (-0.5))^2 = 0.5.
+    t = _terms(action=jp.zeros(12).at[0].set(0.5), last_action=jp.zeros(12).at[1].set(-0.5))
+    assert t["action_rate"] == pytest.approx(0.5)
+    # Foot slip: only feet in contact count: foot 0 slides (0.3, 0.4) -> 0.25; foot 1 in the air.
+    fv = jp.zeros((4, 3)).at[0].set(jp.array([0.3, 0.4, 1.0])).at[1].set(jp.array([2.0, 0, 0]))
+    t = _terms(foot_vel=fv, foot_contact=jp.array([1.0, 0.0, 1.0, 1.0]))
+    assert t["foot_slip"] == pytest.approx(0.25)
+    # Orientation: gravity (0.6, 0, -0.8) -> 0.36.
+    assert _terms(projected_gravity=jp.array([0.6, 0.0, -0.8]))["orientation"] == pytest.approx(0.36)
+    # Stall: slow and far after the grace period -> 1; before grace -> 0; at goal -> 0.
+    assert _terms()["stall"] == 1.0
+    assert _terms(time_s=jp.asarray(rcfg.stall_grace_s / 2))["stall"] == 0.0
+    assert _terms(goal_xy=jp.array([0.3, 0.0]))["stall"] == 0.0
+    # Jump: all four feet off the ground -> 1.
+    assert _terms(foot_contact=jp.zeros(4))["jump"] == 1.0
+    assert _terms(foot_contact=jp.array([0.0, 0.0, 0.0, 1.0]))["jump"] == 0.0
+    # Posture: only within the success radius: one joint 0.2 rad off -> 0.04.
+    q = jp.asarray(constants.DEFAULT_POSE).at[2].add(0.2)
+    assert _terms(q=q, goal_xy=jp.array([0.3, 0.0]))["posture"] == pytest.approx(0.04)
+    assert _terms(q=q)["posture"] == 0.0
+    # Reach: only at the time limit and within 0.5 m.
+    assert _terms(goal_xy=jp.array([0.4, 0.0]), truncated=jp.asarray(1.0))["reach"] == 1.0
+    assert _terms(goal_xy=jp.array([0.6, 0.0]), truncated=jp.asarray(1.0))["reach"] == 0.0
+    assert _terms(goal_xy=jp.array([0.4, 0.0]))["reach"] == 0.0
+    # Termination.
+    assert _terms(failed=jp.asarray(1.0))["termination"] == 1.0
+    # Scaling: dense terms get the control dt, sparse ones not.
+    scaled = rw.scaled_terms({k: jp.asarray(1.0) for k in rw.REWARD_TERMS}, rcfg.scales, 0.02)
+    assert float(scaled["reach"]) == pytest.approx(rcfg.scales.reach)
+    assert float(scaled["torques"]) == pytest.approx(rcfg.scales.torques * 0.02)
+
+
+def test_bad_inputs():
+    with pytest.raises(ValueError, match="unknown source 'lidar'.*tof"):
+        make_env(_cfg(), source="lidar")
+    cfg = _cfg()
+    with pytest.raises(AttributeError):
+        cfg.env.not_a_field = 1  # locked configs reject typos (train.py locks them)
+        cfg.lock()
+        cfg.env.another_typo = 2
+    cfg = _cfg()
+    cfg.reward.scales.bogus = 1.0
+    with pytest.raises(ValueError, match="unknown reward term.*bogus"):
+        make_env(cfg)
+    from foottof.terrain import generate_tile
+
+    with pytest.raises(ValueError, match="lava"):
+        generate_tile("lava", jax.random.PRNGKey(0), 0.5)

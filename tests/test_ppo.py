@@ -1,0 +1,376 @@
+"""Tests of the LSTM PPO trainer: GAE, memory task, Brax env, checkpoints, resume, export."""
+
+import os
+import time
+
+import jax
+import jax.numpy as jp
+import ml_collections
+import numpy as np
+import pytest
+from brax.envs.base import State
+
+from configs import _ppo
+from foottof.ppo import checkpoint as ckpt
+from foottof.ppo import export, losses, runner, toy_envs
+from foottof.ppo import networks as net
+from foottof.ppo import train as train_lib
+
+
+def small_cfg(policy: str = "lstm", **ppo) -> ml_collections.ConfigDict:
+    cfg = ml_collections.ConfigDict()
+    cfg.seed = 0
+    cfg.ppo = _ppo.get_section()
+    cfg.network = _ppo.get_network_section()
+    cfg.train = _ppo.get_train_section()
+    cfg.ppo.num_envs = 64
+    cfg.ppo.num_steps = 16
+    cfg.ppo.num_minibatches = 2
+    cfg.ppo.num_epochs = 4
+    cfg.ppo.entropy_coef = 0.0
+    cfg.ppo.update(ppo)
+    cfg.network.policy = policy
+    cfg.network.lstm_hidden_size = 32
+    cfg.network.actor_hidden = (32,)
+    cfg.network.critic_hidden = (32,)
+    cfg.train.tensorboard = True
+    return cfg
+
+
+def tiny_cfg(**train) -> ml_collections.ConfigDict:
+    cfg = small_cfg(num_envs=8, num_steps=4, num_epochs=2)
+    cfg.network.lstm_hidden_size = 8
+    cfg.network.actor_hidden = (8,)
+    cfg.network.critic_hidden = (8,)
+    cfg.train.update(train)
+    return cfg
+
+
+def train_history(env, cfg, iterations: int):
+    trainer = train_lib.make_train(env, cfg)
+    state = trainer.init(jax.random.PRNGKey(0))
+    history = []
+    for _ in range(iterations):
+        state, metrics = trainer.iteration(state)
+        history.append({k: float(v) for k, v in metrics.items()})
+    return trainer, state, history
+
+
+def tree_equal(a, b) -> bool:
+    eq = jax.tree.map(lambda x, y: bool(np.array_equal(np.asarray(x), np.asarray(y))), a, b)
+    return all(jax.tree.leaves(eq)) and jax.tree.structure(a) == jax.tree.structure(b)
+
+
+# ------------------------------------------------------------------------------------- losses
+def test_gae_hand_computed():
+    # gamma = lam = 0.5, so gamma * lam = 0.25. Two envs, T = 4.
+    # Env 0: truncation at t=1 (done=1, truncation=1): r_1 <- 2 + 0.5 * V_1 * 1 = 2.5.
+    #   r = [1, 2.5, 0, 1], V = [0.5, 1, 2, 1], V_T = 4.
+    #   delta_3 = 1 + 0.5*4 - 1 = 2;  delta_2 = 0 + 0.5*1 - 2 = -1.5;
+    #   delta_1 = 2.5 - 1 = 1.5 (done: no next value);  delta_0 = 1 + 0.5*1 - 0.5 = 1.
+    #   A_3 = 2; A_2 = -1.5 + 0.25*2 = -1; A_1 = 1.5 (done cuts); A_0 = 1 + 0.25*1.5 = 1.375.
+    #   returns = A + V = [1.875, 2.5, 1, 3].
+    # Env 1: termination at t=2 (done=1, truncation=0):
+    #   r = [0, 1, 3, 2], V = [1, 2, 1, 0.5], V_T = 2.
+    #   delta_3 = 2 + 0.5*2 - 0.5 = 2.5; delta_2 = 3 - 1 = 2; delta_1 = 1 + 0.5*1 - 2 = -0.5;
+    #   delta_0 = 0 + 0.5*2 - 1 = 0.  A = [0 + 0.25*0, -0.5 + 0.25*2, 2, 2.5] = [0, 0, 2, 2.5].
+    #   returns = [1, 2, 3, 3].
+    rewards = jp.array([[1.0, 0.0], [2.0, 1.0], [0.0, 3.0], [1.0, 2.0]])
+    values = jp.array([[0.5, 1.0], [1.0, 2.0], [2.0, 1.0], [1.0, 0.5]])
+    dones = jp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [0.0, 0.0]])
+    truncation = jp.array([[0.0, 0.0], [1.0, 0.0], [0.0, 0.0], [0.0, 0.0]])
+    last_value = jp.array([4.0, 2.0])
+    r = losses.bootstrap_truncation(rewards, values, truncation, gamma=0.5)
+    adv, ret = losses.compute_gae(r, values, dones, last_value, gamma=0.5, lam=0.5)
+    np.testing.assert_allclose(adv[:, 0], [1.375, 1.5, -1.0, 2.0], rtol=1e-6)
+    np.testing.assert_allclose(ret[:, 0], [1.875, 2.5, 1.0, 3.0], rtol=1e-6)
+    np.testing.assert_allclose(adv[:, 1], [0.0, 0.0, 2.0, 2.5], atol=1e-6)
+    np.testing.assert_allclose(ret[:, 1], [1.0, 2.0, 3.0, 3.0], rtol=1e-6)
+
+
+def test_adaptive_learning_rate_rule():
+    lr = lambda lr0, kl: float(train_lib.adapt_learning_rate(lr0, kl, 0.01, 1e-5, 1e-2))
+    assert lr(1e-3, 0.03) == pytest.approx(1e-3 / 1.5)  # kl > 2 * desired
+    assert lr(1e-3, 0.004) == pytest.approx(1.5e-3)  # 0 < kl < desired / 2
+    assert lr(1e-3, 0.01) == pytest.approx(1e-3)  # in band
+    assert lr(1e-3, 0.0) == pytest.approx(1e-3)  # kl == 0: rsl_rl leaves lr alone
+    assert lr(1.2e-5, 0.05) == pytest.approx(1e-5)  # clamped below
+    assert lr(8e-3, 0.001) == pytest.approx(1e-2)  # clamped above
+
+
+def test_gaussian_helpers_against_jax_scipy():
+    key_x, key_m, key_s = jax.random.split(jax.random.PRNGKey(3), 3)
+    x = jax.random.normal(key_x, (5, 3))
+    mean = jax.random.normal(key_m, (5, 3))
+    log_std = 0.3 * jax.random.normal(key_s, (3,))
+    ref = jax.scipy.stats.norm.logpdf(x, mean, jp.exp(log_std)).sum(-1)
+    np.testing.assert_allclose(net.gaussian_log_prob(x, mean, log_std), ref, rtol=1e-5)
+    # Entropy of N(0, s^2) per dim = 0.5 * log(2 pi e s^2).
+    ref_h = jp.sum(0.5 * jp.log(2 * jp.pi * jp.e * jp.exp(2 * log_std)))
+    np.testing.assert_allclose(net.gaussian_entropy(log_std), ref_h, rtol=1e-6)
+    # KL(N(0,1) || N(1, 2^2)) = log 2 + (1 + 1) / 8 - 0.5 = 0.44314718.
+    kl = net.gaussian_kl(jp.zeros(1), jp.ones(1), jp.ones(1), 2 * jp.ones(1))
+    np.testing.assert_allclose(kl, np.log(2) + 0.25 - 0.5, rtol=1e-6)
+
+
+# -------------------------------------------------------------------------------- memory task
+@pytest.fixture(scope="module")
+def lstm_memory_run():
+    # Privileged (dict) observations: the critic also sees the cue, the actor only at t = 0.
+    env = toy_envs.make_memory_env(episode_length=8, privileged=True)
+    return env, *train_history(env, small_cfg("lstm"), 40)
+
+
+def test_memory_task_solved_by_lstm_not_by_mlp(lstm_memory_run):
+    # Mean reward per step over all 8 steps: recall earns ~0, any memoryless policy <= -7/8.
+    _, _, _, lstm_hist = lstm_memory_run
+    env = toy_envs.make_memory_env(episode_length=8, privileged=True)
+    _, _, mlp_hist = train_history(env, small_cfg("mlp"), 40)
+    lstm_final = np.mean([h["train/reward"] for h in lstm_hist[-5:]])
+    mlp_final = np.mean([h["train/reward"] for h in mlp_hist[-5:]])
+    assert lstm_hist[0]["train/reward"] < -0.7
+    assert lstm_final > -0.3, lstm_final
+    assert mlp_final < -0.7, mlp_final
+    assert np.mean([h["episode/success"] for h in lstm_hist[-5:]]) > 0.9
+    for h in lstm_hist:
+        assert h["ppo/params_finite"] == 1.0
+        assert 1e-5 <= h["ppo/learning_rate"] <= 1e-2
+        assert h["train/episode_length"] == 8.0  # every finished episode has 8 steps
+
+
+def test_episode_metrics_match_env(lstm_memory_run):
+    # 64 envs x 16 steps with episodes of 8 steps: exactly 128 episodes end per rollout.
+    _, _, _, hist = lstm_memory_run
+    assert all(h["train/episodes"] == 128 for h in hist)
+    # reward/recall is the step reward averaged over all steps = train/reward.
+    for h in hist:
+        assert h["reward/recall"] == pytest.approx(h["train/reward"], rel=1e-5)
+        assert h["train/episode_return"] == pytest.approx(8 * h["train/reward"], rel=1e-4)
+
+
+# ----------------------------------------------------------------------------------- export
+def test_export_numpy_policy_matches_jax(lstm_memory_run, tmp_path):
+    env, trainer, state, _ = lstm_memory_run
+    networks = trainer.networks
+    path = export.export_policy(str(tmp_path / "policy"), networks, state.params, state.normalizer)
+    policy = export.NumpyPolicy(path)
+    act = jax.jit(networks.policy_fn(state.params, state.normalizer, deterministic=True))
+
+    # Record 20 steps of one env (an episode boundary at t = 8 and 16) with the JAX policy.
+    env_state = env.reset(jax.random.PRNGKey(7)[None])
+    carry = networks.init_carry(1)
+    reset = jp.ones((1,), bool)
+    obs_seq, jax_actions, resets = [], [], []
+    for _ in range(20):
+        carry, action = act(carry, env_state.obs, reset, None)
+        obs_seq.append(np.asarray(env_state.obs["state"][0]))
+        jax_actions.append(np.asarray(action[0]))
+        resets.append(bool(reset[0]))
+        env_state = env.step(env_state, action)
+        reset = env_state.done.astype(bool)
+    assert sum(resets) == 3  # t = 0, 8, 16
+
+    np_actions = []
+    for obs, r in zip(obs_seq, resets, strict=True):
+        if r:
+            policy.reset()
+        np_actions.append(policy(obs))
+    np.testing.assert_allclose(np.array(np_actions), np.array(jax_actions), atol=1e-5)
+    assert np.abs(np.array(jax_actions)).max() > 0.5  # trained actions, not ~0
+
+
+def test_numpy_policy_is_fast_at_default_size(tmp_path):
+    cfg = _ppo.get_network_section()  # default sizes: LSTM 256, MLP 512-256-128
+    networks = net.make_networks(12, cfg)
+    obs = jp.zeros((1, 48))
+    params = jax.jit(networks.init_params)(jax.random.PRNGKey(0), obs)
+    normalizer = networks.init_normalizer(obs)
+    policy = export.NumpyPolicy(
+        export.export_policy(str(tmp_path / "p.npz"), networks, params, normalizer)
+    )
+    x = np.random.default_rng(0).normal(size=48).astype(np.float32)
+    policy(x)
+    t0 = time.perf_counter()
+    for _ in range(200):
+        a = policy(x)
+    per_call_s = (time.perf_counter() - t0) / 200
+    assert a.shape == (12,) and a.dtype == np.float32
+    assert per_call_s < 0.005, per_call_s  # 50 Hz needs < 20 ms
+    with pytest.raises(ValueError, match=r"obs shape \(47,\)"):
+        policy(x[:47])
+
+
+# ------------------------------------------------------------------------------- brax env
+@pytest.mark.slow
+def test_brax_inverted_pendulum_improves():  # ~20 s alone, ~65 s on a loaded 2-core machine
+    from brax import envs
+
+    env = train_lib.wrap_brax_env(
+        envs.get_environment("inverted_pendulum", backend="positional"), episode_length=200
+    )
+    cfg = small_cfg("lstm", num_envs=32, num_steps=32)
+    _, _, hist = train_history(env, cfg, 20)
+    first = hist[0]["train/episode_length"]
+    late = np.nanmean([h["train/episode_length"] for h in hist[10:]])
+    assert first < 40, first
+    assert late > 3 * first, (first, late)
+
+
+# ------------------------------------------------------------------------- checkpoints/runner
+# One env object for the runner tests: runner.run reuses the compiled iteration for the same env
+# and ppo/network sections, so these tests compile it once.
+MEMORY_ENV = toy_envs.make_memory_env()
+
+
+def test_checkpoint_round_trip_exact(tmp_path):
+    env = toy_envs.make_memory_env(privileged=True)
+    trainer = train_lib.make_train(env, tiny_cfg())
+    state, _ = trainer.iteration(trainer.init(jax.random.PRNGKey(0)))
+    saved = jax.device_get(state)
+    checkpointer = ckpt.Checkpointer(str(tmp_path))
+    assert checkpointer.save(state) == 1
+    restored, with_rollout = checkpointer.restore(trainer.init(jax.random.PRNGKey(1)))
+    checkpointer.close()
+    assert with_rollout
+    assert tree_equal(saved, jax.device_get(restored))
+
+
+def test_resume_equals_straight_run(tmp_path, capsys):
+    env = MEMORY_ENV
+    straight = runner.run(tiny_cfg(num_iterations=4), env, str(tmp_path / "a"))
+    runner.run(tiny_cfg(num_iterations=2), env, str(tmp_path / "b"))
+    resumed = runner.run(tiny_cfg(num_iterations=4), env, str(tmp_path / "b"), resume=True)
+    assert int(resumed.iteration) == 4
+    assert tree_equal(jax.device_get(straight), jax.device_get(resumed))
+    run_b = tmp_path / "b"
+    rows = (run_b / "metrics.csv").read_text().strip().splitlines()
+    assert len(rows) == 5 and rows[0].startswith("iteration,env_steps")
+    assert (run_b / "config.json").exists() and (run_b / "config.yaml").exists()
+    assert any(n.startswith("events.out.tfevents") for n in os.listdir(run_b))
+    out = capsys.readouterr().out
+    assert "compiled in" in out and "it 4/4" in out and "success" in out and "reward: recall" in out
+    with pytest.raises(FileExistsError):
+        runner.run(tiny_cfg(num_iterations=4), env, str(run_b))
+
+
+class _NanAfter:
+    """Memory env whose reward turns NaN once a step counter reaches `steps` (per env)."""
+
+    def __init__(self, steps: int):
+        self.env = toy_envs.CueMemoryEnv()
+        self.steps = steps
+        self.action_size = 1
+
+    def reset(self, key):
+        s = self.env.reset(key)
+        return s.replace(info={**s.info, "count": jp.zeros((), jp.int32)})
+
+    def step(self, state, action):
+        count = state.info["count"] + 1
+        s = self.env.step(
+            state.replace(info={k: v for k, v in state.info.items() if k != "count"}), action
+        )
+        reward = jp.where(count > self.steps, jp.nan, s.reward)
+        return s.replace(reward=reward, info={**s.info, "count": count})
+
+
+def test_nan_guard_keeps_last_good_checkpoint(tmp_path):
+    env = train_lib.VmapEnv(_NanAfter(steps=8))  # 4 steps per iteration: NaN in iteration 3
+    cfg = tiny_cfg(num_iterations=5, checkpoint_every=1)
+    with pytest.raises(
+        runner.NonFiniteError, match="iteration 3.*Last good checkpoint: iteration 2"
+    ):
+        runner.run(cfg, env, str(tmp_path))
+    checkpointer = ckpt.Checkpointer(str(tmp_path))
+    assert checkpointer.latest_step() == 2
+    trainer = train_lib.make_train(env, cfg)
+    restored, _ = checkpointer.restore(trainer.init(jax.random.PRNGKey(0)))
+    checkpointer.close()
+    assert all(np.isfinite(np.asarray(x)).all() for x in jax.tree.leaves(restored.params))
+
+
+def test_keyboard_interrupt_saves(tmp_path):
+    def interrupt(it, metrics, state):
+        if it == 3:
+            raise KeyboardInterrupt
+
+    cfg = tiny_cfg(num_iterations=10, checkpoint_every=100)
+    with pytest.raises(KeyboardInterrupt):
+        runner.run(cfg, MEMORY_ENV, str(tmp_path), on_iteration=interrupt)
+    checkpointer = ckpt.Checkpointer(str(tmp_path))
+    assert checkpointer.all_steps() == [3]
+    checkpointer.close()
+
+
+def test_init_from(tmp_path):
+    env = MEMORY_ENV
+    source = runner.run(tiny_cfg(num_iterations=1), env, str(tmp_path / "stage1"))
+    stage2 = runner.run(
+        tiny_cfg(num_iterations=1),
+        env,
+        str(tmp_path / "stage2"),
+        init_from=str(tmp_path / "stage1"),
+    )
+    # The loaded normalizer keeps counting: 8 envs x 4 steps per iteration in each stage.
+    assert int(source.normalizer.count.lo) == 32
+    assert int(stage2.normalizer.count.lo) == 64
+    assert int(stage2.iteration) == 1
+    zeros = jax.tree.map(jp.zeros_like, (source.params, source.normalizer))
+    params, normalizer = ckpt.load_params_and_normalizer(str(tmp_path / "stage1"), *zeros)
+    assert tree_equal(jax.device_get(params), jax.device_get(source.params))
+    assert tree_equal(jax.device_get(normalizer), jax.device_get(source.normalizer))
+
+    bigger = tiny_cfg(num_iterations=1)
+    bigger.network.lstm_hidden_size = 16
+    with pytest.raises(
+        ValueError,
+        match=r"leaf \['params'\]\['params'\]\['actor'\]\['dense_0'\]\['kernel'\] "
+        r"has shape \(8, 8\) in the checkpoint but \(16, 8\)",
+    ):
+        runner.run(bigger, env, str(tmp_path / "stage2b"), init_from=str(tmp_path / "stage1"))
+    with pytest.raises(FileNotFoundError, match="init_from"):
+        runner.run(tiny_cfg(), env, str(tmp_path / "stage2c"), init_from=str(tmp_path / "nope"))
+
+
+# ------------------------------------------------------------------------------- bad input
+def test_bad_config_values():
+    env = toy_envs.make_memory_env()
+    with pytest.raises(ValueError, match="ppo.num_envs=0"):
+        train_lib.make_train(env, small_cfg(num_envs=0))
+    with pytest.raises(ValueError, match=r"ppo.num_envs=10 .*num_minibatches"):
+        train_lib.make_train(env, small_cfg(num_envs=10, num_minibatches=4))
+    with pytest.raises(ValueError, match="device count 3"):
+        train_lib.make_train(env, small_cfg(num_envs=64), devices=jax.devices() * 3)
+    with pytest.raises(ValueError, match="ppo.lr_schedule='cosine'"):
+        train_lib.make_train(env, small_cfg(lr_schedule="cosine"))
+    with pytest.raises(ValueError, match="network.policy='gru'"):
+        train_lib.make_train(env, small_cfg("gru"))
+    locked = small_cfg()
+    locked.lock()
+    with pytest.raises(AttributeError, match="lerning_rate"):
+        locked.ppo.lerning_rate = 1e-3
+
+
+def test_env_state_without_env_axis_is_rejected():
+    class Unbatched(train_lib.VmapEnv):
+        def reset(self, keys):
+            s = super().reset(keys)
+            return s.replace(info={**s.info, "shared": jp.zeros(3)})
+
+    with pytest.raises(ValueError, match=r"\['shared'\] has shape \(3,\)"):
+        train_lib.make_train(Unbatched(toy_envs.CueMemoryEnv()), small_cfg())
+
+
+def test_toy_env_contract():
+    env = toy_envs.make_memory_env(episode_length=3)
+    s = env.reset(jax.random.split(jax.random.PRNGKey(0), 5))
+    assert isinstance(s, State) and s.obs.shape == (5, 2) and s.done.shape == (5,)
+    cue = s.obs[:, 0]
+    assert set(np.asarray(cue).tolist()) <= {-1.0, 1.0}
+    s = env.step(s, cue[:, None])  # step 0 pays nothing
+    assert np.all(s.reward == 0) and np.all(s.obs == 0)
+    s = env.step(s, -cue[:, None])  # wrong sign: |-c - c| = 2
+    np.testing.assert_allclose(s.reward, -2.0)
+    s = env.step(s, -cue[:, None])
+    assert np.all(s.done == 1) and np.all(s.metrics["episode/success"] == 0)
+    assert np.all(s.obs[:, 1] == 1)  # auto-reset: first-step flag of a new episode

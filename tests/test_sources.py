@@ -300,8 +300,11 @@ def _poses(hf, n, seed, aligned):
     return f32(np.concatenate([xy, z[:, None]], -1)), f32(quat), f32(q)
 
 
-_ideal_jit = jax.jit(sources.mock_ideal_readings, static_argnums=0)
-_aggre_jit = jax.jit(sources.mock_aggre_readings, static_argnums=0)
+@jax.jit
+def _aggre_and_ideal(state, hf, pos, quat, q):
+    """(mock_aggre, mock_ideal) readings of one robot (one compile shared by several tests)."""
+    return (sources.mock_aggre_readings(TOF, state, quat, q),
+            sources.mock_ideal_readings(TOF, hf, pos, quat, q))
 
 
 @jax.jit
@@ -386,8 +389,7 @@ def test_mock_aggre_equals_mock_ideal_when_all_cells_in_view(stones_hf):
     assert bool(state.scan_in_view.all())
     np.testing.assert_array_equal(state.scan, em.height_scan(stones_hf, pos[3],
                                                              em.yaw_from_quat(quat[3])))
-    a = _aggre_jit(TOF, state, quat[3], q)
-    b = _ideal_jit(TOF, stones_hf, pos[3], quat[3], q)
+    a, b = _aggre_and_ideal(state, stones_hf, pos[3], quat[3], q)
     np.testing.assert_array_equal(a.valid, b.valid)
     np.testing.assert_array_equal(a.distance_m, b.distance_m)
 
@@ -400,19 +402,18 @@ def test_mock_aggre_reads_remembered_cells_like_mock_ideal(straight_walk):
     fk = kin.forward_kinematics(q)
     feet_ij = np.round((np.asarray(fk.foot_pos[:, :2]) + 2.5) / 0.05).astype(int)
     assert not np.asarray(state.scan_in_view)[feet_ij[:, 1], feet_ij[:, 0]].any()
-    a = _aggre_jit(TOF, state, quat, q)
-    b = _ideal_jit(TOF, hf, pos, quat, q)
+    a, b = _aggre_and_ideal(state, hf, pos, quat, q)
     assert np.asarray(b.valid).mean() > 0.5
     np.testing.assert_array_equal(a.valid, b.valid)
     np.testing.assert_allclose(a.distance_m, b.distance_m, atol=1.0e-3 + 1e-6)
 
 
-def test_unknown_cells_give_no_return():
+def test_unknown_cells_give_no_return(straight_walk):
     """Never-seen cells hold UNKNOWN_HEIGHT_M, 4 m below the base: beyond the 1 m ToF range, so a
     foot over unknown cells reads max range and invalid, like over a deep gap."""
-    scan = jp.full((em.SCAN_N, em.SCAN_N), em.UNKNOWN_HEIGHT_M)
-    r = jax.jit(sources.readings_from_scan, static_argnums=0)(
-        TOF, scan, jp.array([1.0, 0, 0, 0]), jp.asarray(constants.DEFAULT_POSE, jp.float32))
+    hf, pos, quat, state = straight_walk
+    state = state.replace(scan=jp.full_like(state.scan, em.UNKNOWN_HEIGHT_M))
+    r, _ = _aggre_and_ideal(state, hf, pos, quat, jp.asarray(constants.DEFAULT_POSE, jp.float32))
     assert not np.asarray(r.valid).any()
     np.testing.assert_array_equal(r.distance_m, TOF.max_range_m)
 

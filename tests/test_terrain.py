@@ -526,6 +526,11 @@ def test_update_levels_rules():
     new = update_levels(jax.random.key(0), level, done, reached, progress, num_levels, 0.5)
     # up, down (< half), stay (>= half), floor at 0, up, not done, not done
     np.testing.assert_array_equal(np.asarray(new), [3, 1, 2, 0, 4, 2, 4])
+    # Single env with Python scalars (bools must not turn into ~True == -2).
+    key = jax.random.key(0)
+    assert int(update_levels(key, 2, True, False, 0.7, num_levels)) == 2
+    assert int(update_levels(key, 2, True, False, 0.2, num_levels)) == 1
+    assert int(update_levels(key, 2, False, True, 1.0, num_levels)) == 2
 
 
 def test_update_levels_top_level_goes_random():

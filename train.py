@@ -3,7 +3,7 @@
 import os
 import sys
 
-from absl import app, flags
+from absl import app, flags, logging
 from ml_collections import config_flags
 
 _CONFIG = config_flags.DEFINE_config_file(
@@ -17,6 +17,7 @@ _RUN_DIR = flags.DEFINE_string(
 
 def main(argv):
     del argv
+    logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint write at INFO
     from foottof.envs import make_training_env
     from foottof.ppo import runner
 

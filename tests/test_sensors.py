@@ -1,4 +1,4 @@
-"""Tests of foottof.sensors: ray caster vs mujoco.mj_ray, VL53L5CX zones, timing, degradation, fit."""
+"""Tests of foottof.sensors: ray caster vs mj_ray, VL53L5CX zones, timing, degradation, fit."""
 
 import math
 
@@ -15,6 +15,7 @@ from foottof.sensors import (
     ToFReading,
     ToFSpec,
     bounds_from_config,
+    characterize,
     degrade,
     init,
     make_spec,
@@ -26,7 +27,6 @@ from foottof.sensors import (
     step,
     zero_levels,
 )
-from foottof.sensors import characterize
 from foottof.sensors import noise_model as nm
 from foottof.terrain.heightfield import Heightfield, hfield_xml, write_to_mjmodel
 
@@ -55,7 +55,9 @@ def _stones_over_pit(seed: int) -> np.ndarray:
 
 def _mj_model(hf: Heightfield):
     asset, geom = hfield_xml(hf)
-    m = mujoco.MjModel.from_xml_string(f"<mujoco><asset>{asset}</asset><worldbody>{geom}</worldbody></mujoco>")
+    m = mujoco.MjModel.from_xml_string(
+        f"<mujoco><asset>{asset}</asset><worldbody>{geom}</worldbody></mujoco>"
+    )
     write_to_mjmodel(m, hf)
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
@@ -73,7 +75,10 @@ def _oracle_rays(h: np.ndarray, rng) -> dict[str, tuple[np.ndarray, np.ndarray]]
     ys = lambda n: rng.uniform(Y0 - 0.2, Y0 + 3.4, n)
     out = {}
     n = 10_000
-    out["random"] = (np.stack([xs(n), ys(n), rng.uniform(-1.3, 1.0, n)], -1), _unit(rng.normal(size=(n, 3))))
+    out["random"] = (
+        np.stack([xs(n), ys(n), rng.uniform(-1.3, 1.0, n)], -1),
+        _unit(rng.normal(size=(n, 3))),
+    )
     n = 1500
     o = np.stack([xs(n), ys(n), rng.uniform(-0.45, 1.0, n)], -1)
     o[:500, 0] = X0 + rng.integers(1, N_GRID - 1, 500) * CELL  # on interior grid lines
@@ -89,11 +94,25 @@ def _oracle_rays(h: np.ndarray, rng) -> dict[str, tuple[np.ndarray, np.ndarray]]
     dd = _unit(dd)
     out["grazing_corners"] = (p - 0.7 * dd, dd)
     # Along the (one-cell-wide, steep) stone faces: near-horizontal rays skimming grid lines.
-    o = np.stack([np.full(n, X0 - 0.05), Y0 + rng.integers(1, N_GRID - 1, n) * CELL, rng.uniform(-0.5, 0.2, n)], -1)
+    o = np.stack(
+        [
+            np.full(n, X0 - 0.05),
+            Y0 + rng.integers(1, N_GRID - 1, n) * CELL,
+            rng.uniform(-0.5, 0.2, n),
+        ],
+        -1,
+    )
     o[:, 1] += rng.choice([-1.0, 1.0], n) * rng.uniform(1e-4, 1e-3, n)
     dd = _unit(np.stack([np.ones(n), rng.uniform(-1e-3, 1e-3, n), rng.uniform(-0.05, 0.05, n)], -1))
     out["along_faces_x"] = (o, dd)
-    o = np.stack([X0 + rng.integers(1, N_GRID - 1, n) * CELL, np.full(n, Y0 - 0.05), rng.uniform(-0.5, 0.2, n)], -1)
+    o = np.stack(
+        [
+            X0 + rng.integers(1, N_GRID - 1, n) * CELL,
+            np.full(n, Y0 - 0.05),
+            rng.uniform(-0.5, 0.2, n),
+        ],
+        -1,
+    )
     o[:, 0] += rng.choice([-1.0, 1.0], n) * rng.uniform(1e-4, 1e-3, n)
     out["along_faces_y"] = (o, dd[:, [1, 0, 2]])
     # Starting below the surface (inside stones / the pit solid).
@@ -206,14 +225,18 @@ def _brute_zone_min(spec: ToFSpec, rot: np.ndarray, height: float, n: int = 400)
     out = np.zeros((g, g))
     for r in range(g):
         for c in range(g):
-            tx, ty = np.meshgrid(np.linspace(edges[r], edges[r + 1], n), np.linspace(edges[c], edges[c + 1], n))
+            tx, ty = np.meshgrid(
+                np.linspace(edges[r], edges[r + 1], n), np.linspace(edges[c], edges[c + 1], n)
+            )
             v = _unit(np.stack([tx, ty, np.ones_like(tx)], -1)) @ rot.T
             out[r, c] = np.min(height / -v[..., 2])
     return out.reshape(-1)
 
 
 def test_flat_floor_zone_minimum_closed_form():
-    spec = ToFSpec(num_sensors=2, tilt_deg=((0.0, 0.0), (17.0, 0.0)), offset_m=((0.0, 0.0, 0.0),) * 2)
+    spec = ToFSpec(
+        num_sensors=2, tilt_deg=((0.0, 0.0), (17.0, 0.0)), offset_m=((0.0, 0.0, 0.0),) * 2
+    )
     h = 0.4
     pos = jp.array([[0.1, 0.2, h], [-0.1, 0.0, h]])
     rot = jp.asarray(np.stack([DOWN, DOWN]))
@@ -223,8 +246,14 @@ def test_flat_floor_zone_minimum_closed_form():
     # Untilted, looking straight down: centre zones h, edge zones h sqrt(1 + T^2/4), corners
     # h sqrt(1 + T^2/2) (nearest point = the zone corner closest to the optical axis).
     centre, edge, corner = h, h * math.sqrt(1 + T_HALF**2 / 4), h * math.sqrt(1 + T_HALF**2 / 2)
-    expect = np.array([[corner, edge, edge, corner], [edge, centre, centre, edge],
-                       [edge, centre, centre, edge], [corner, edge, edge, corner]]).reshape(-1)
+    expect = np.array(
+        [
+            [corner, edge, edge, corner],
+            [edge, centre, centre, edge],
+            [edge, centre, centre, edge],
+            [corner, edge, edge, corner],
+        ]
+    ).reshape(-1)
     np.testing.assert_allclose(got[0], expect, atol=0.6e-3)  # 1 mm quantization
     # Tilted 17 deg about x: the perpendicular foot of the floor lies inside the FoV on a zone
     # row boundary, off the ray lattice; the two zones sharing it read exactly h, although none
@@ -275,12 +304,16 @@ def test_sense_vmap_over_envs_and_8x8():
     spec = ToFSpec(grid=8, rate_hz=15.0)
     assert spec.num_rays == 145 and spec.num_zones == 64
     rng = np.random.default_rng(0)
-    pos = jp.asarray(np.concatenate([rng.uniform(-0.5, 0.5, (3, 4, 2)), rng.uniform(0.05, 0.8, (3, 4, 1))], -1))
+    pos = jp.asarray(
+        np.concatenate([rng.uniform(-0.5, 0.5, (3, 4, 2)), rng.uniform(0.05, 0.8, (3, 4, 1))], -1)
+    )
     rot = jp.asarray(np.broadcast_to(DOWN, (3, 4, 3, 3)))
     hf = _flat()
     batched = jax.jit(jax.vmap(lambda p, m: sense(spec, hf, p, m)))(pos, rot)
     single = SENSE(spec, hf, pos[1], rot[1])
-    np.testing.assert_allclose(np.asarray(batched.distance_m[1]), np.asarray(single.distance_m), atol=1e-6)
+    np.testing.assert_allclose(
+        np.asarray(batched.distance_m[1]), np.asarray(single.distance_m), atol=1e-6
+    )
     assert np.asarray(batched.valid).any()
     assert batched.distance_m.shape == (3, 4, 64)
 
@@ -305,12 +338,20 @@ def _run(spec, bounds, phase, n_steps, key=0):
     """Feed reading value = 0.1 + 0.001 * step for n_steps; return obs distances and ages."""
     model = nm.load_model()
     f, z = spec.num_sensors, spec.num_zones
-    state, obs = reset(spec, bounds, model, jax.random.PRNGKey(key), _reading(np.full((f, z), 0.1)),
-                       phase_s=jp.asarray(phase, jp.float32))
-    dists, ages, delay = [obs.distance_m[:, 0]], [], int(state.delay_steps)
+    state, obs = reset(
+        spec,
+        bounds,
+        model,
+        jax.random.PRNGKey(key),
+        _reading(np.full((f, z), 0.1)),
+        phase_s=jp.asarray(phase, jp.float32),
+    )
+    dists, delay = [obs.distance_m[:, 0]], int(state.delay_steps)
 
     def body(st, n):
-        st, ob = step(spec, model, st, _reading(jp.full((f, z), 0.1) + 0.001 * n), jax.random.PRNGKey(n))
+        st, ob = step(
+            spec, model, st, _reading(jp.full((f, z), 0.1) + 0.001 * n), jax.random.PRNGKey(n)
+        )
         return st, (ob.distance_m[:, 0], ob.age_s)
 
     _, (d, a) = jax.lax.scan(body, state, jp.arange(1, n_steps + 1))
@@ -319,8 +360,13 @@ def _run(spec, bounds, phase, n_steps, key=0):
 
 @pytest.mark.parametrize("k", [0, 1, 3])
 def test_delay_returns_reading_k_steps_earlier(k):
-    spec = ToFSpec(num_sensors=2, rate_hz=50.0, tilt_deg=((0.0, 0.0),) * 2, offset_m=((0.0, 0.0, 0.0),) * 2,
-                   delay_capacity_steps=4)
+    spec = ToFSpec(
+        num_sensors=2,
+        rate_hz=50.0,
+        tilt_deg=((0.0, 0.0),) * 2,
+        offset_m=((0.0, 0.0, 0.0),) * 2,
+        delay_capacity_steps=4,
+    )
     d, age, delay = _run(spec, _zero_bounds(k, k), [0.0, 0.0], 12)
     assert delay == k
     for n in range(13):  # frames at every control step (50 Hz, phase 0): value of step n - k
@@ -350,8 +396,14 @@ def test_delay_draw_and_capacity():
 
 def test_sample_and_hold_ages_60hz_and_15hz():
     for grid, rate in ((4, 60.0), (8, 15.0)):
-        spec = ToFSpec(num_sensors=2, grid=grid, rate_hz=rate, tilt_deg=((0.0, 0.0),) * 2,
-                       offset_m=((0.0, 0.0, 0.0),) * 2, delay_capacity_steps=0)
+        spec = ToFSpec(
+            num_sensors=2,
+            grid=grid,
+            rate_hz=rate,
+            tilt_deg=((0.0, 0.0),) * 2,
+            offset_m=((0.0, 0.0, 0.0),) * 2,
+            delay_capacity_steps=0,
+        )
         phase = np.array([0.3, 0.7]) / rate  # no completion exactly between two steps
         d, age, _ = _run(spec, _zero_bounds(0, 0), phase, 30)
         period = 1 / rate
@@ -399,7 +451,9 @@ def test_degradation_levels_and_effects():
     model = nm.load_model()
     noise = _sensor.get_noise_section()
     b2 = bounds_from_config(noise, 2)
-    lv = jax.jit(jax.vmap(lambda k: sample_levels(k, b2, 4)))(jax.random.split(jax.random.PRNGKey(0), 2000))
+    lv = jax.jit(jax.vmap(lambda k: sample_levels(k, b2, 4)))(
+        jax.random.split(jax.random.PRNGKey(0), 2000)
+    )
     for f in ("proportional", "gaussian_m", "missing_rate", "model_scale"):
         x = np.asarray(getattr(lv, f))
         bound = float(getattr(b2, f))
@@ -408,9 +462,13 @@ def test_degradation_levels_and_effects():
     # Gaussian only: residual std = level; missing only: dropped fraction = level, set to 0.
     rd = ToFReading(jp.full((4, 4096), 0.5), jp.ones((4, 4096), bool), jp.zeros((4, 4096)))
     z = zero_levels(4)
-    d, v = DEGRADE(jax.random.PRNGKey(1), z.replace(gaussian_m=jp.float32(0.01)), rd, model, 1.0, 0.001)
+    d, v = DEGRADE(
+        jax.random.PRNGKey(1), z.replace(gaussian_m=jp.float32(0.01)), rd, model, 1.0, 0.001
+    )
     assert np.std(np.asarray(d) - 0.5) == pytest.approx(0.01, rel=0.05) and np.asarray(v).all()
-    d, v = DEGRADE(jax.random.PRNGKey(2), z.replace(missing_rate=jp.float32(0.2)), rd, model, 1.0, 0.001)
+    d, v = DEGRADE(
+        jax.random.PRNGKey(2), z.replace(missing_rate=jp.float32(0.2)), rd, model, 1.0, 0.001
+    )
     v = np.asarray(v)
     assert (~v).mean() == pytest.approx(0.2, abs=0.01) and np.all(np.asarray(d)[~v] == 0.0)
     off = z.replace(offset_m=jp.array([0.01, -0.02, 0.0, 0.6], jp.float32))
@@ -432,15 +490,23 @@ def test_degradation_levels_and_effects():
 
 def test_fit_recovers_generating_parameters(tmp_path):
     true = nm.NoiseModel(jp.array([-6.3, 1.8, 0.7, 0.4]), jp.array([-5.5, 3.5, 1.2, 0.8]))
-    data = nm.synthesize(true, 7, np.linspace(0.1, 1.0, 10), [0.0, 15.0, 30.0, 45.0, 60.0, 70.0], 1500)
+    data = nm.synthesize(
+        true, 7, np.linspace(0.1, 1.0, 10), [0.0, 15.0, 30.0, 45.0, 60.0, 70.0], 1500
+    )
     path = tmp_path / "bench.csv"
     nm.write_bench_csv(str(path), data, "synthetic")
     fit, _ = nm.fit(nm.read_bench_csv(str(path)))
-    np.testing.assert_allclose(np.asarray(fit.log_std_coef), np.asarray(true.log_std_coef), atol=0.12)
-    np.testing.assert_allclose(np.asarray(fit.logit_missing_coef), np.asarray(true.logit_missing_coef), atol=0.4)
+    np.testing.assert_allclose(
+        np.asarray(fit.log_std_coef), np.asarray(true.log_std_coef), atol=0.12
+    )
+    np.testing.assert_allclose(
+        np.asarray(fit.logit_missing_coef), np.asarray(true.logit_missing_coef), atol=0.4
+    )
     dd, aa = np.meshgrid(np.linspace(0.1, 1.0, 10), np.radians([0, 30, 60]))
     np.testing.assert_allclose(nm.noise_std(fit, dd, aa), nm.noise_std(true, dd, aa), rtol=0.06)
-    np.testing.assert_allclose(nm.missing_prob(fit, dd, aa), nm.missing_prob(true, dd, aa), atol=0.02)
+    np.testing.assert_allclose(
+        nm.missing_prob(fit, dd, aa), nm.missing_prob(true, dd, aa), atol=0.02
+    )
 
 
 def test_characterize_cli_roundtrip(tmp_path):
@@ -450,7 +516,9 @@ def test_characterize_cli_roundtrip(tmp_path):
     assert characterize.main([str(csv_path), "--json", str(js), "--png", str(png)]) == 0
     model = nm.load_model(str(js))
     default = nm.load_model()
-    np.testing.assert_allclose(nm.noise_std(model, 0.5, 0.3), nm.noise_std(default, 0.5, 0.3), rtol=0.2)
+    np.testing.assert_allclose(
+        nm.noise_std(model, 0.5, 0.3), nm.noise_std(default, 0.5, 0.3), rtol=0.2
+    )
     assert png.stat().st_size > 10_000
     # The shipped example CSV parses and fits.
     nm.fit(nm.read_bench_csv(str(nm.resources.files("foottof").joinpath("data", nm.EXAMPLE_CSV))))
@@ -488,9 +556,16 @@ def test_bad_inputs(tmp_path):
 
 
 def test_config_sections_build_spec_and_bounds():
-    cfg = ml_collections.ConfigDict({"sensor": _sensor.get_section(), "noise": _sensor.get_noise_section()})
+    cfg = ml_collections.ConfigDict(
+        {"sensor": _sensor.get_section(), "noise": _sensor.get_noise_section()}
+    )
     spec = make_spec(cfg.sensor, cfg.noise)
-    assert (spec.num_sensors, spec.num_zones, spec.num_rays, spec.delay_capacity_steps) == (4, 16, 41, 4)
+    assert (spec.num_sensors, spec.num_zones, spec.num_rays, spec.delay_capacity_steps) == (
+        4,
+        16,
+        41,
+        4,
+    )
     b1, b2 = bounds_from_config(cfg.noise, 1, spec), bounds_from_config(cfg.noise, 2, spec)
     for f in ("offset_m", "proportional", "gaussian_m", "missing_rate", "model_scale"):
         assert float(getattr(b1, f)) < float(getattr(b2, f))

@@ -59,7 +59,7 @@ CAMERAS: tuple[Camera, ...] = (
 
 
 def camera_rotation(cam: Camera) -> np.ndarray:
-    """(3, 3) camera axes (columns: forward, left, up) in the base frame: Rz(yaw) @ Ry(pitch_down)."""
+    """(3, 3) camera axes (columns: forward, left, up) in the base frame, Rz(yaw) @ Ry(pitch)."""
     cy, sy = math.cos(math.radians(cam.yaw_deg)), math.sin(math.radians(cam.yaw_deg))
     cp, sp = math.cos(math.radians(cam.pitch_down_deg)), math.sin(math.radians(cam.pitch_down_deg))
     rz = np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]])

@@ -34,9 +34,11 @@ ODOM_ANG_NOISE_RADS = 0.2  # angular velocity noise half-width [rad/s]
 
 
 def scan_heightfield(heights: jax.Array) -> Heightfield:
-    """Wrap (101, 101) robot-centric heights [m, relative to base z] as a static-origin Heightfield."""
+    """Wrap (101, 101) robot-centric heights [m, rel. to base z] as a static-origin Heightfield."""
     if heights.shape[-2:] != (SCAN_N, SCAN_N):
-        raise ValueError(f"scan heights must have shape (..., {SCAN_N}, {SCAN_N}), got {heights.shape}")
+        raise ValueError(
+            f"scan heights must have shape (..., {SCAN_N}, {SCAN_N}), got {heights.shape}"
+        )
     return Heightfield(
         heights=heights,
         x0_m=-SCAN_HALF_SIZE_M,
@@ -63,7 +65,8 @@ def yaw_from_quat(quat: jax.Array) -> jax.Array:
 def _rot_z(yaw: jax.Array) -> jax.Array:
     c, s = jp.cos(yaw), jp.sin(yaw)
     o, z = jp.ones_like(yaw), jp.zeros_like(yaw)
-    return jp.stack([jp.stack([c, -s, z], -1), jp.stack([s, c, z], -1), jp.stack([z, z, o], -1)], -2)
+    rows = [jp.stack([c, -s, z], -1), jp.stack([s, c, z], -1), jp.stack([z, z, o], -1)]
+    return jp.stack(rows, -2)
 
 
 def tilt_rotation(base_quat: jax.Array) -> jax.Array:

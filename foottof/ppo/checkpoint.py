@@ -33,7 +33,9 @@ def _sub(state: TrainState, item: str) -> dict:
 
 def _flatten(tree: Any) -> tuple[dict, list]:
     leaves = jax.tree_util.tree_flatten_with_path(tree)[0]
-    flat = {f"leaf_{i:04d}": leaf for i, (_, leaf) in enumerate(leaves)}
+    # Zero-size leaves (e.g. unused MJX data fields) cannot be saved by orbax: they are rebuilt
+    # from the target's structure on restore (see _unflatten).
+    flat = {f"leaf_{i:04d}": leaf for i, (_, leaf) in enumerate(leaves) if np.size(leaf) > 0}
     manifest = [
         [jax.tree_util.keystr(path), list(np.shape(leaf)), str(getattr(leaf, "dtype", "float"))]
         for path, leaf in leaves
@@ -48,7 +50,18 @@ def _abstract(tree: Any) -> dict:
             x.shape, x.dtype, sharding=getattr(x, "sharding", None)
         )
         for i, x in enumerate(leaves)
+        if np.size(x) > 0
     }
+
+
+def _unflatten(target: Any, flat: dict) -> Any:
+    """Inverse of _flatten on the structure of `target` (zero-size leaves taken from `target`)."""
+    treedef = jax.tree.structure(target)
+    leaves = [
+        flat[f"leaf_{i:04d}"] if np.size(x) > 0 else x
+        for i, x in enumerate(jax.tree.leaves(target))
+    ]
+    return jax.tree.unflatten(treedef, leaves)
 
 
 def check_compatible(item: str, saved_manifest: list, target: Any, source: str) -> None:
@@ -127,11 +140,7 @@ class Checkpointer:
         restored = self._manager.restore(step, args=ocp.args.Composite(**args))
         fields = {}
         for item in items:
-            sub = _sub(target, item)
-            treedef = jax.tree.structure(sub)
-            flat = restored[item]
-            leaves = [flat[f"leaf_{i:04d}"] for i in range(treedef.num_leaves)]
-            fields.update(jax.tree.unflatten(treedef, leaves))
+            fields.update(_unflatten(_sub(target, item), restored[item]))
         return target.replace(**fields), "rollout" in items
 
     def close(self) -> None:
@@ -178,7 +187,5 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
         manager.close()
     out = []
     for item, sub in target.items():
-        treedef = jax.tree.structure(sub)
-        leaves = [restored[item][f"leaf_{i:04d}"] for i in range(treedef.num_leaves)]
-        out.append(jax.tree.unflatten(treedef, leaves)[item])
+        out.append(_unflatten(sub, restored[item])[item])
     return out[0], out[1]

@@ -34,13 +34,24 @@ def plot_heatmaps(model: nm.NoiseModel, stats: dict | None, path: str) -> None:
     std_mm = 1e3 * np.asarray(nm.noise_std(model, dd, np.radians(aa)))
     miss = 1e2 * np.asarray(nm.missing_prob(model, dd, np.radians(aa)))
     fig, axes = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
-    panels = ((std_mm, "noise level (std) [mm]", "std_m", 1e3), (miss, "missing rate [%]", "missing_rate", 1e2))
+    panels = (
+        (std_mm, "noise level (std) [mm]", "std_m", 1e3),
+        (miss, "missing rate [%]", "missing_rate", 1e2),
+    )
     for ax, (field, title, key, scale) in zip(axes, panels, strict=True):
         vmax = float(np.nanmax(field))
         im = ax.pcolormesh(d, a, field, shading="auto", cmap="viridis", vmin=0.0, vmax=vmax)
         if stats is not None:
-            ax.scatter(stats["distance_m"], stats["incidence_deg"], c=scale * stats[key], cmap="viridis",
-                       vmin=0.0, vmax=vmax, edgecolors="w", s=40)
+            ax.scatter(
+                stats["distance_m"],
+                stats["incidence_deg"],
+                c=scale * stats[key],
+                cmap="viridis",
+                vmin=0.0,
+                vmax=vmax,
+                edgecolors="w",
+                s=40,
+            )
         ax.set_xlabel("nominal distance [m]")
         ax.set_ylabel("incidence angle [deg]")
         ax.set_title(title)
@@ -50,13 +61,22 @@ def plot_heatmaps(model: nm.NoiseModel, stats: dict | None, path: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m foottof.sensors.characterize", description=__doc__,
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("csv", nargs="?", help="bench CSV to fit (columns: " + ", ".join(nm.CSV_COLUMNS) + ")")
+    p = argparse.ArgumentParser(
+        prog="python -m foottof.sensors.characterize",
+        description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    p.add_argument(
+        "csv", nargs="?", help="bench CSV to fit (columns: " + ", ".join(nm.CSV_COLUMNS) + ")"
+    )
     p.add_argument("--json", default="tof_noise_fit.json", help="output parameter JSON")
     p.add_argument("--png", default="tof_noise_heatmaps.png", help="output heatmap PNG")
-    p.add_argument("--synthesize", metavar="OUT_CSV", help="write a synthetic bench CSV instead of fitting")
-    p.add_argument("--params", default="", help="noise-model JSON used by --synthesize (default: packaged)")
+    p.add_argument(
+        "--synthesize", metavar="OUT_CSV", help="write a synthetic bench CSV instead of fitting"
+    )
+    p.add_argument(
+        "--params", default="", help="noise-model JSON used by --synthesize (default: packaged)"
+    )
     p.add_argument("--seed", type=int, default=0, help="--synthesize random seed")
     p.add_argument("--samples", type=int, default=200, help="--synthesize frames per setting")
     args = p.parse_args(argv)
@@ -68,10 +88,12 @@ def main(argv: list[str] | None = None) -> int:
         data = nm.synthesize(model, args.seed, SYNTH_DISTANCES_M, SYNTH_ANGLES_DEG, args.samples)
         src = args.params or f"foottof/data/{nm.DEFAULT_JSON}"
         comment = (
-            "SYNTHETIC example data, NOT bench measurements: generated from the hand-set noise model\n"
+            "SYNTHETIC example data, NOT bench measurements: generated from the hand-set noise "
+            "model\n"
             f"{src} by: python -m foottof.sensors.characterize --synthesize <out.csv> "
             f"--seed {args.seed} --samples {args.samples}\n"
-            f"settings: distances {list(SYNTH_DISTANCES_M)} m x angles {list(SYNTH_ANGLES_DEG)} deg; "
+            f"settings: distances {list(SYNTH_DISTANCES_M)} m x angles "
+            f"{list(SYNTH_ANGLES_DEG)} deg; "
             "measured = 0 where valid = 0"
         )
         nm.write_bench_csv(args.synthesize, data, comment)

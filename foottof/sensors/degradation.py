@@ -1,4 +1,4 @@
-"""ToF degradation (offset, proportional/Gaussian/characterized noise, dropouts) and frame timing."""
+"""ToF degradation (offset, proportional/Gaussian/model noise, dropouts) and frame timing."""
 
 from __future__ import annotations
 
@@ -68,7 +68,9 @@ def bounds_from_config(noise_cfg, stage: int, spec: ToFSpec | None = None) -> De
         if not v >= 0.0:
             raise ValueError(f"noise.stage{stage}.{f} must be >= 0, got {v!r}")
     if vals["missing_rate"] > 1.0:
-        raise ValueError(f"noise.stage{stage}.missing_rate must be in [0, 1], got {vals['missing_rate']!r}")
+        raise ValueError(
+            f"noise.stage{stage}.missing_rate must be in [0, 1], got {vals['missing_rate']!r}"
+        )
     lo, hi = int(c.min_delay_steps), int(c.max_delay_steps)
     cap = spec.delay_capacity_steps if spec is not None else hi
     if not 0 <= lo <= hi <= cap:
@@ -95,7 +97,9 @@ def sample_levels(key: jax.Array, bounds: DegradationBounds, num_sensors: int) -
     u = jax.random.uniform(key_lv, (len(_FIELDS),))  # level_i ~ U[0, bound_i]
     lv = {f: u[i] * getattr(bounds, f) for i, f in enumerate(_FIELDS)}
     # offset per sensor ~ U[-a, a], a = offset level
-    lv["offset_m"] = lv["offset_m"] * jax.random.uniform(key_off, (num_sensors,), minval=-1.0, maxval=1.0)
+    lv["offset_m"] = lv["offset_m"] * jax.random.uniform(
+        key_off, (num_sensors,), minval=-1.0, maxval=1.0
+    )
     return DegradationLevels(**lv)
 
 

@@ -75,7 +75,9 @@ def model_from_dict(obj: dict) -> NoiseModel:
     for key in ("log_std_coef", "logit_missing_coef"):
         v = np.asarray(obj.get(key, ()), dtype=float)
         if v.shape != (len(FEATURES),) or not np.all(np.isfinite(v)):
-            raise ValueError(f"noise model {key!r} must be {len(FEATURES)} finite numbers, got {obj.get(key)!r}")
+            raise ValueError(
+                f"noise model {key!r} must be {len(FEATURES)} finite numbers, got {obj.get(key)!r}"
+            )
         out.append(jp.asarray(v, jp.float32))
     return NoiseModel(log_std_coef=out[0], logit_missing_coef=out[1])
 
@@ -88,7 +90,7 @@ def save_model(model: NoiseModel, path: str, **meta) -> None:
 
 
 def load_model(path: str | None = None) -> NoiseModel:
-    """Load a noise-model JSON; ``None`` or "" = the packaged default (hand-set, see its comment)."""
+    """Load a noise-model JSON; ``None`` or "" = the packaged default (hand-set, see its source)."""
     if not path:
         text = resources.files("foottof").joinpath("data", DEFAULT_JSON).read_text()
     else:
@@ -126,7 +128,9 @@ def read_bench_csv(path: str) -> dict[str, np.ndarray]:
     header = [h.strip() for h in (reader.fieldnames or [])]
     missing = [c for c in CSV_COLUMNS if c not in header]
     if missing:
-        raise ValueError(f"CSV is missing column(s) {missing}; required: {list(CSV_COLUMNS)}, got {header}")
+        raise ValueError(
+            f"CSV is missing column(s) {missing}; required: {list(CSV_COLUMNS)}, got {header}"
+        )
     cols = {c: [] for c in CSV_COLUMNS}
     for i, row in enumerate(reader, start=1):
         row = {k.strip(): v for k, v in row.items() if k is not None}
@@ -175,8 +179,12 @@ def synthesize(model: NoiseModel, seed: int, distances_m, angles_deg, samples: i
     p = np.asarray(missing_prob(model, d, th), float)
     meas = np.round((d + std * rng.standard_normal(d.shape)) * 1000.0) / 1000.0
     valid = (rng.random(d.shape) >= p).astype(float)
-    return {"nominal_distance_m": d, "incidence_deg": a, "measured_m": np.where(valid > 0, meas, 0.0),
-            "valid": valid}
+    return {
+        "nominal_distance_m": d,
+        "incidence_deg": a,
+        "measured_m": np.where(valid > 0, meas, 0.0),
+        "valid": valid,
+    }
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -201,8 +209,14 @@ def grouped_stats(data: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
     mean = s1 / np.maximum(nv, 1.0)
     s2 = np.bincount(inv, weights=np.where(valid, (m - mean[inv]) ** 2, 0.0), minlength=g)
     std = np.where(nv >= 2, np.sqrt(s2 / np.maximum(nv - 1.0, 1.0)), np.nan)
-    return {"distance_m": keys[:, 0], "incidence_deg": keys[:, 1], "n": n, "n_valid": nv,
-            "std_m": std, "missing_rate": 1.0 - nv / n}
+    return {
+        "distance_m": keys[:, 0],
+        "incidence_deg": keys[:, 1],
+        "n": n,
+        "n_valid": nv,
+        "std_m": std,
+        "missing_rate": 1.0 - nv / n,
+    }
 
 
 def fit(data: dict[str, np.ndarray], quant_m: float = 0.001) -> tuple[NoiseModel, dict]:
@@ -222,7 +236,8 @@ def fit(data: dict[str, np.ndarray], quant_m: float = 0.001) -> tuple[NoiseModel
     use = (st["n_valid"] >= 3) & np.isfinite(st["std_m"])
     if use.sum() < len(FEATURES):
         raise ValueError(
-            f"need >= {len(FEATURES)} (distance, angle) settings with >= 3 valid samples to fit the "
+            f"need >= {len(FEATURES)} (distance, angle) settings with >= 3 valid samples to fit "
+            "the "
             f"noise level, got {int(use.sum())}"
         )
     var = np.maximum(st["std_m"][use] ** 2 - quant_m**2 / 12.0, (0.1 * quant_m) ** 2)
@@ -246,5 +261,7 @@ def fit(data: dict[str, np.ndarray], quant_m: float = 0.001) -> tuple[NoiseModel
             break
     if not (np.all(np.isfinite(a_std)) and np.all(np.isfinite(b))):
         raise ValueError("noise-model fit did not converge (degenerate distance/angle design?)")
-    model = NoiseModel(log_std_coef=jp.asarray(a_std, jp.float32), logit_missing_coef=jp.asarray(b, jp.float32))
+    model = NoiseModel(
+        log_std_coef=jp.asarray(a_std, jp.float32), logit_missing_coef=jp.asarray(b, jp.float32)
+    )
     return model, st

@@ -66,12 +66,17 @@ def _box_faces(lo, hi, o, d):
     return jp.stack(out)
 
 
-_FACE_NORMALS = ((-1.0, 0.0, 0.0), (1.0, 0.0, 0.0), (0.0, -1.0, 0.0), (0.0, 1.0, 0.0),
-                 (0.0, 0.0, -1.0), (0.0, 0.0, 1.0))
+_FACE_NORMALS = (
+    (-1.0, 0.0, 0.0),
+    (1.0, 0.0, 0.0),
+    (0.0, -1.0, 0.0),
+    (0.0, 1.0, 0.0),
+    (0.0, 0.0, -1.0),
+    (0.0, 0.0, 1.0),
+)
 
 
-def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int,
-              with_normal: bool):
+def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int, with_normal: bool):
     """Distance and outward unit normal of the first hit of one ray (inf if none)."""
     nrow, ncol, cell = hf.nrow, hf.ncol, hf.cell_m
     rx, ry = hf.half_extents_m
@@ -89,80 +94,95 @@ def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int,
     n_p, n_q = jp.where(swap, nrow, ncol), jp.where(swap, ncol, nrow)  # vertices along p, q
     s_p, s_q = jp.where(swap, ncol, 1), jp.where(swap, 1, ncol)  # flat-index strides
 
-    s = jp.arange(n_strips)
-    step_dir = jp.where(dp < 0.0, -1, 1)
-    k = jp.floor(p0).astype(jp.int32) + step_dir * s  # strip k spans p in [k, k + 1]
-    moving = dp != 0.0
-    dp_safe = jp.where(moving, dp, 1.0)
-    t_a = (k.astype(dt) - p0) / dp_safe
-    t_b = (k.astype(dt) + 1.0 - p0) / dp_safe
-    t_in = jp.where(moving, jp.maximum(jp.minimum(t_a, t_b), 0.0), 0.0)
-    t_out = jp.where(moving, jp.minimum(jp.maximum(t_a, t_b), max_range_m), max_range_m)
-    strip_ok = (t_in <= t_out) & (moving | (s == 0))
-    q_in, q_out = q0 + t_in * dq, q0 + t_out * dq
-    r = jp.floor(jp.minimum(q_in, q_out)).astype(jp.int32)  # rows r and r + 1 cover the strip
+    def strip_hits(s):
+        """Hit parameters (..., 4) and (dz/dp, dz/dq) of the 4 triangles of strip(s) s."""
+        step_dir = jp.where(dp < 0.0, -1, 1)
+        k = jp.floor(p0).astype(jp.int32) + step_dir * s  # strip k spans p in [k, k + 1]
+        moving = dp != 0.0
+        dp_safe = jp.where(moving, dp, 1.0)
+        t_a = (k.astype(dt) - p0) / dp_safe
+        t_b = (k.astype(dt) + 1.0 - p0) / dp_safe
+        t_in = jp.where(moving, jp.maximum(jp.minimum(t_a, t_b), 0.0), 0.0)
+        t_out = jp.where(moving, jp.minimum(jp.maximum(t_a, t_b), max_range_m), max_range_m)
+        strip_ok = (t_in <= t_out) & (moving | (s == 0))
+        q_in, q_out = q0 + t_in * dq, q0 + t_out * dq
+        r = jp.floor(jp.minimum(q_in, q_out)).astype(jp.int32)  # rows r and r + 1 cover the strip
 
-    def vert(pi, qi):
-        pc = jp.clip(pi, 0, n_p - 1)
-        qc = jp.clip(qi, 0, n_q - 1)
-        return h_flat[pc * s_p + qc * s_q]
+        def vert(pi, qi):
+            pc = jp.clip(pi, 0, n_p - 1)
+            qc = jp.clip(qi, 0, n_q - 1)
+            return h_flat[pc * s_p + qc * s_q]
 
-    # Heights H[p, q] of the 2 x 3 vertices under the strip: rows r, r + 1, r + 2.
-    hk = [vert(k, r + j) for j in range(3)]
-    hk1 = [vert(k + 1, r + j) for j in range(3)]
+        # Heights H[p, q] of the 2 x 3 vertices under the strip: rows r, r + 1, r + 2.
+        hk = [vert(k, r + j) for j in range(3)]
+        hk1 = [vert(k + 1, r + j) for j in range(3)]
 
-    # Vertices V(P, Q) relative to the ray origin in (cells, cells, m), computed from their indices
-    # only: a vertex shared by neighbouring cells or strips gets bit-identical coordinates. Each
-    # grid edge a -> b is tested with the same canonical orientation everywhere (E(a, b) =
-    # D . (a x b) = (D x a) . b, from the lower to the higher index), so the inside tests of
-    # adjacent triangles are exactly complementary: watertight, no tolerance needed.
-    dz = d[2]
-    dd = dp * dp + dq * dq + dz * dz
-    heights = (hk, hk1)
-    vx = [k.astype(dt) + x - p0 for x in range(2)]
-    vy = [(r + y).astype(dt) - q0 for y in range(3)]
-    vz = [[heights[x][y] - o[2] for y in range(3)] for x in range(2)]
-    # cr = D x V and tv = (V . D) / (D . D) per vertex, indexed [x][y].
-    cr = [[(dq * vz[x][y] - dz * vy[y], dz * vx[x] - dp * vz[x][y], dp * vy[y] - dq * vx[x])
-           for y in range(3)] for x in range(2)]
-    tv = [[(vx[x] * dp + vy[y] * dq + vz[x][y] * dz) / dd for y in range(3)] for x in range(2)]
+        # Vertices V(P, Q) relative to the ray origin in (cells, cells, m), computed from their
+        # indices only: a vertex shared by neighbouring cells or strips gets bit-identical
+        # coordinates. Each grid edge a -> b is tested with the same canonical orientation
+        # everywhere (E(a, b) = D . (a x b) = (D x a) . b, from the lower to the higher index), so
+        # the inside tests of adjacent triangles are exactly complementary: watertight, no
+        # tolerance needed. Strips are scanned one at a time (lax.scan): the per-strip working
+        # set stays in cache, ~4x faster on CPU than materializing all strips at once.
+        dz = d[2]
+        dd = dp * dp + dq * dq + dz * dz
+        heights = (hk, hk1)
+        vx = [k.astype(dt) + x - p0 for x in range(2)]
+        vy = [(r + y).astype(dt) - q0 for y in range(3)]
+        vz = [[heights[x][y] - o[2] for y in range(3)] for x in range(2)]
+        # cr = D x V and tv = (V . D) / (D . D) per vertex, indexed [x][y].
+        cr = [
+            [
+                (dq * vz[x][y] - dz * vy[y], dz * vx[x] - dp * vz[x][y], dp * vy[y] - dq * vx[x])
+                for y in range(3)
+            ]
+            for x in range(2)
+        ]
+        tv = [[(vx[x] * dp + vy[y] * dq + vz[x][y] * dz) / dd for y in range(3)] for x in range(2)]
 
-    def edge(a, b):  # a = (x, y) canonical first vertex, b = (x, y) second vertex
-        c = cr[a[0]][a[1]]
-        return c[0] * vx[b[0]] + c[1] * vy[b[1]] + c[2] * vz[b[0]][b[1]]
+        def edge(a, b):  # a = (x, y) canonical first vertex, b = (x, y) second vertex
+            c = cr[a[0]][a[1]]
+            return c[0] * vx[b[0]] + c[1] * vy[b[1]] + c[2] * vz[b[0]][b[1]]
 
-    e_p = [edge((0, y), (1, y)) for y in range(3)]  # edges along p at rows r + y
-    ts = []
-    for j in range(2):  # cells (k, r + j): triangles A = (00, 10, 11) and B = (00, 11, 01)
-        rr = r + j
-        cell_ok = strip_ok & (k >= 0) & (k <= n_p - 2) & (rr >= 0) & (rr <= n_q - 2)
-        e_left = edge((0, j), (0, j + 1))
-        e_right = edge((1, j), (1, j + 1))
-        e_diag = edge((0, j), (1, j + 1))
-        t00, t10, t11, t01 = tv[0][j], tv[1][j], tv[1][j + 1], tv[0][j + 1]
-        for (w_ab, w_bc, w_ca), (ta, tb, tc) in (
-            ((e_p[j], e_right, -e_diag), (t00, t10, t11)),
-            ((e_diag, -e_p[j + 1], -e_left), (t00, t11, t01)),
-        ):
-            pos = (w_ab >= 0) & (w_bc >= 0) & (w_ca >= 0)
-            neg = (w_ab <= 0) & (w_bc <= 0) & (w_ca <= 0)
-            w_sum = w_ab + w_bc + w_ca
-            ok = cell_ok & (pos | neg) & (w_sum != 0.0)
-            # Hit point = barycentric mix (weights w_bc, w_ca, w_ab) -> its ray parameter.
-            t = (w_bc * ta + w_ca * tb + w_ab * tc) / jp.where(ok, w_sum, 1.0)
-            ts.append(jp.where(ok & (t >= 0.0) & (t <= max_range_m), t, jp.inf))
-    t_all = jp.stack(ts, -1)  # (n_strips, 4): cell r (A, B), cell r + 1 (A, B)
-    i_best = jp.argmin(t_all.reshape(-1))
-    t_tri = t_all.reshape(-1)[i_best]
+        e_p = [edge((0, y), (1, y)) for y in range(3)]  # edges along p at rows r + y
+        ts = []
+        for j in range(2):  # cells (k, r + j): triangles A = (00, 10, 11) and B = (00, 11, 01)
+            rr = r + j
+            cell_ok = strip_ok & (k >= 0) & (k <= n_p - 2) & (rr >= 0) & (rr <= n_q - 2)
+            e_left = edge((0, j), (0, j + 1))
+            e_right = edge((1, j), (1, j + 1))
+            e_diag = edge((0, j), (1, j + 1))
+            t00, t10, t11, t01 = tv[0][j], tv[1][j], tv[1][j + 1], tv[0][j + 1]
+            for (w_ab, w_bc, w_ca), (ta, tb, tc) in (
+                ((e_p[j], e_right, -e_diag), (t00, t10, t11)),
+                ((e_diag, -e_p[j + 1], -e_left), (t00, t11, t01)),
+            ):
+                pos = (w_ab >= 0) & (w_bc >= 0) & (w_ca >= 0)
+                neg = (w_ab <= 0) & (w_bc <= 0) & (w_ca <= 0)
+                w_sum = w_ab + w_bc + w_ca
+                ok = cell_ok & (pos | neg) & (w_sum != 0.0)
+                # Hit point = barycentric mix (weights w_bc, w_ca, w_ab) -> its ray parameter.
+                t = (w_bc * ta + w_ca * tb + w_ab * tc) / jp.where(ok, w_sum, 1.0)
+                ts.append(jp.where(ok & (t >= 0.0) & (t <= max_range_m), t, jp.inf))
+        gps = []
+        for j in range(2):
+            h00, h01, h10, h11 = hk[j], hk[j + 1], hk1[j], hk1[j + 1]
+            gps += [(h10 - h00, h11 - h10), (h11 - h01, h01 - h00)]
+        g = jp.stack([jp.stack(gg, -1) for gg in gps], -2)  # (..., 4, 2)
+        return jp.stack(ts, -1), g
+
+    def scan_body(carry, s):
+        best_t, best_g = carry
+        t4, g4 = strip_hits(s)
+        i = jp.argmin(t4)
+        closer = t4[i] < best_t
+        return (jp.where(closer, t4[i], best_t), jp.where(closer, g4[i], best_g)), None
+
+    (t_tri, g_best), _ = jax.lax.scan(
+        scan_body, (jp.asarray(jp.inf, dt), jp.zeros((2,), dt)), jp.arange(n_strips)
+    )
     if with_normal:
-        si, ci = i_best // 4, i_best % 4
-        j, tri = ci // 2, ci % 2
-        h00 = jp.where(j == 0, hk[0][si], hk[1][si])
-        h01 = jp.where(j == 0, hk[1][si], hk[2][si])
-        h10 = jp.where(j == 0, hk1[0][si], hk1[1][si])
-        h11 = jp.where(j == 0, hk1[1][si], hk1[2][si])
-        gp = jp.where(tri == 0, h10 - h00, h11 - h01)  # dz/dp [m per cell]
-        gq = jp.where(tri == 0, h11 - h10, h01 - h00)  # dz/dq [m per cell]
+        gp, gq = g_best[0], g_best[1]
         dzdx, dzdy = jp.where(swap, gq, gp) / cell, jp.where(swap, gp, gq) / cell
         n_tri = jp.stack([-dzdx, -dzdy, jp.ones((), dt)])
         n_tri = n_tri / jp.linalg.norm(n_tri)
@@ -219,7 +239,9 @@ def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool
     unit = directions / jp.where(norm > 0.0, norm, 1.0)
     h_flat = hfield.clipped().heights.astype(dt).reshape(-1)
     n_strips = num_strips(hfield, r)
-    t, n = jax.vmap(lambda o, d: _cast_one(h_flat, hfield, o, d, r, n_strips, with_normal))(origins, unit)
+    t, n = jax.vmap(lambda o, d: _cast_one(h_flat, hfield, o, d, r, n_strips, with_normal))(
+        origins, unit
+    )
     hit = jp.isfinite(t) & (norm[:, 0] > 0.0)
     return jp.where(hit, t, MISS), jp.where(hit[:, None], n, 0.0)
 

@@ -59,7 +59,9 @@ class ToFSpec:
 
     def __post_init__(self):
         if self.grid not in MAX_RATE_HZ:
-            raise ValueError(f"grid (resolution) must be one of {sorted(MAX_RATE_HZ)}, got {self.grid!r}")
+            raise ValueError(
+                f"grid (resolution) must be one of {sorted(MAX_RATE_HZ)}, got {self.grid!r}"
+            )
         if not 0.0 < self.rate_hz <= MAX_RATE_HZ[self.grid]:
             raise ValueError(
                 f"rate_hz={self.rate_hz!r} out of range (0, {MAX_RATE_HZ[self.grid]}] for "
@@ -89,7 +91,9 @@ class ToFSpec:
                 f"{np.shape(self.offset_m)}"
             )
         if self.delay_capacity_steps < 0:
-            raise ValueError(f"delay_capacity_steps must be >= 0, got {self.delay_capacity_steps!r}")
+            raise ValueError(
+                f"delay_capacity_steps must be >= 0, got {self.delay_capacity_steps!r}"
+            )
         if not self.control_dt_s > 0.0:
             raise ValueError(f"control_dt_s must be > 0, got {self.control_dt_s!r}")
 
@@ -129,8 +133,15 @@ class ToFSpec:
         for r in range(g):
             for c in range(g):
                 corner = lambda a, b: a * (g + 1) + b
-                out.append([corner(r, c), corner(r, c + 1), corner(r + 1, c + 1), corner(r + 1, c),
-                            nc + r * g + c])
+                out.append(
+                    [
+                        corner(r, c),
+                        corner(r, c + 1),
+                        corner(r + 1, c + 1),
+                        corner(r + 1, c),
+                        nc + r * g + c,
+                    ]
+                )
         return np.asarray(out, np.int32)
 
     def mount_rotations(self) -> np.ndarray:
@@ -138,8 +149,12 @@ class ToFSpec:
         out = []
         for tx, ty in np.asarray(self.tilt_deg, float):
             a, b = math.radians(tx), math.radians(ty)
-            rx = np.array([[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]])
-            ry = np.array([[math.cos(b), 0, math.sin(b)], [0, 1, 0], [-math.sin(b), 0, math.cos(b)]])
+            rx = np.array(
+                [[1, 0, 0], [0, math.cos(a), -math.sin(a)], [0, math.sin(a), math.cos(a)]]
+            )
+            ry = np.array(
+                [[math.cos(b), 0, math.sin(b)], [0, 1, 0], [-math.sin(b), 0, math.cos(b)]]
+            )
             out.append(rx @ ry)
         return np.asarray(out)
 
@@ -309,7 +324,8 @@ def sense(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot) -> ToFReading:
     ]  # (F, Z) index into the sensor's rays
     cos_inc = jp.abs(
         jp.sum(
-            jp.take_along_axis(dirs, ray_idx[..., None], 1) * jp.take_along_axis(n, ray_idx[..., None], 1),
+            jp.take_along_axis(dirs, ray_idx[..., None], 1)
+            * jp.take_along_axis(n, ray_idx[..., None], 1),
             -1,
         )
     )

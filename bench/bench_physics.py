@@ -43,8 +43,12 @@ def bench(ground: str, args, tuning: dict) -> None:
     if ground == "hfield":
         # Flat hfield of realistic size, robots spread over its middle.
         hf = Heightfield(
-            heights=np.zeros((args.nrow, args.ncol), np.float32), x0_m=0.0, y0_m=0.0,
-            cell_m=args.cell_m, z_floor_m=-1.0, z_range_m=2.0,
+            heights=np.zeros((args.nrow, args.ncol), np.float32),
+            x0_m=0.0,
+            y0_m=0.0,
+            cell_m=args.cell_m,
+            z_floor_m=-1.0,
+            z_range_m=2.0,
         )
     m = model.make_model(hf, **tuning)
     mx = mjx.put_model(m)
@@ -107,8 +111,13 @@ def main() -> None:
     p.add_argument("--cell_m", type=float, default=0.04, help="hfield vertex spacing [m]")
     p.add_argument("--kp", type=float, default=80.0, help="PD stiffness [N m/rad]")
     p.add_argument("--kd", type=float, default=2.0, help="PD damping [N m s/rad]")
-    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
-                   help=f"make_model tuning override, keys: {sorted(model.DEFAULT_TUNING)}")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help=f"make_model tuning override, keys: {sorted(model.DEFAULT_TUNING)}",
+    )
     args = p.parse_args()
     tuning = {}
     for kv in args.set:

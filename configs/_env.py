@@ -4,7 +4,7 @@ import ml_collections
 
 
 def get_model_section() -> ml_collections.ConfigDict:
-    """Keyword arguments of foottof.robot.make_model (same names; defaults = model.DEFAULT_TUNING)."""
+    """Keyword arguments of foottof.robot.make_model (defaults = model.DEFAULT_TUNING)."""
     m = ml_collections.ConfigDict()
     m.shank_scale = 1.0  # KFE->foot offset scale, physics only (model-mismatch sweep) [-], 0.8..1.2
     m.foot_radius_m = 0.0315  # foot contact sphere radius [m], 0.02..0.05
@@ -31,13 +31,13 @@ def get_control_section() -> ml_collections.ConfigDict:
     c.kp = 80.0  # joint PD stiffness [N m/rad]
     c.kd = 2.0  # joint PD damping [N m s/rad]
     c.torque_limit = 80.0  # continuous joint torque limit [N m]
-    c.velocity_limit = 8.5  # joint speed where drive torque in the motion direction reaches 0 [rad/s]
+    c.velocity_limit = 8.5  # speed where drive torque along the motion hits 0 [rad/s]
     c.saturation_torque = 120.0  # DC-motor line peak torque [N m]; None = constant clip only
     return c
 
 
 def get_section() -> ml_collections.ConfigDict:
     e = ml_collections.ConfigDict()
-    e.model = get_model_section()  # physics model: make_model(hfield, tof_tilt_deg=..., **env.model)
+    e.model = get_model_section()  # physics: make_model(hfield, tof_tilt_deg=..., **env.model)
     e.control = get_control_section()  # PD law: pd_torque(q_target, q, qd, **env.control)
     return e

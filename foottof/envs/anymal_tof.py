@@ -96,23 +96,24 @@ class AnymalToFEnv(Env):
         cfg,
         source: str = "tof",
         terrain_map: TerrainMap | None = None,
-        shank_scale: float = 1.0,
+        shank_scale: float | None = None,
     ):
         if source not in SOURCES:
             raise ValueError(f"unknown source {source!r}; valid sources: {list(SOURCES)}")
         rw.check_scales(cfg.reward.scales)
         self.cfg = cfg
         self.source = source
-        self.shank_scale = float(shank_scale)
         ecfg = cfg.env
+        model_kw = dict(ecfg.model)
+        cfg_shank = model_kw.pop("shank_scale", 1.0)
+        self.shank_scale = float(cfg_shank if shank_scale is None else shank_scale)
+        self.foot_radius_m = float(model_kw.get("foot_radius_m", constants.FOOT_RADIUS_M))
         if terrain_map is None:
             spec = TerrainMapSpec.from_config(cfg.terrain, int(cfg.stage))
             terrain_map = build_terrain_map(jax.random.PRNGKey(int(cfg.seed)), spec)
         self.tmap = terrain_map
         self.hfield = terrain_map.hfield.clipped()
-        self.mj_model = make_model(
-            terrain_map.hfield, shank_scale=self.shank_scale, **dict(ecfg.model)
-        )
+        self.mj_model = make_model(terrain_map.hfield, shank_scale=self.shank_scale, **model_kw)
         self.mx = mjx.put_model(self.mj_model)
         d0 = mujoco.MjData(self.mj_model)
         mujoco.mj_resetDataKeyframe(self.mj_model, d0, 0)
@@ -125,7 +126,7 @@ class AnymalToFEnv(Env):
         self._base_mass = float(self.mj_model.body_mass[self._base_body_id])
         self._default_q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
         self._stand_height = kinematics.nominal_base_height(
-            constants.DEFAULT_POSE, self.shank_scale, constants.FOOT_RADIUS_M
+            constants.DEFAULT_POSE, self.shank_scale, self.foot_radius_m
         )
         self.dt = constants.CONTROL_DT_S
         self.episode_steps = int(round(float(ecfg.episode_length_s) / self.dt))
@@ -172,9 +173,10 @@ class AnymalToFEnv(Env):
         push = push * float(self.cfg.env.randomization.push_vel_ms) * push_now
         d = d.replace(qvel=d.qvel.at[0:2].add(push))
         mx = self._episode_model(p)
-        kp = float(self.cfg.env.kp) * p.kp_scale
-        kd = float(self.cfg.env.kd) * p.kd_scale
-        d, taus = control.control_step(mx, d, q_target, kp * p.motor_strength, kd * p.motor_strength)
+        ccfg = dict(self.cfg.env.control)
+        kp = float(ccfg.pop("kp")) * p.kp_scale * p.motor_strength
+        kd = float(ccfg.pop("kd")) * p.kd_scale * p.motor_strength
+        d, taus = control.control_step(mx, d, q_target, kp, kd, **ccfg)
         d = d.replace(qpos=jp.nan_to_num(d.qpos), qvel=jp.nan_to_num(d.qvel))
         step = task.step + 1
 
@@ -185,7 +187,7 @@ class AnymalToFEnv(Env):
         foot_pos = fk.foot_pos  # (4, 3)
         foot_vel = self._foot_velocities(d)
         foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
-        contact = (foot_clear < constants.FOOT_RADIUS_M + float(self.cfg.env.contact_margin_m))
+        contact = (foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m))
         contact = contact.astype(jp.float32)
         gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
         failed = self._failed(d, gravity, foot_pos)
@@ -453,7 +455,7 @@ class AnymalToFEnv(Env):
         pts = fk.foot_pos[:, None, :2] + offs[None]  # (4, 9, 2)
         heights = self.hfield.height_at(pts) - fk.foot_pos[:, None, 2]  # rel. to foot centre
         clear = fk.foot_pos[:, 2] - self.hfield.height_at(fk.foot_pos[:, :2])
-        margin = constants.FOOT_RADIUS_M + float(self.cfg.env.contact_margin_m)
+        margin = self.foot_radius_m + float(self.cfg.env.contact_margin_m)
         contact = (clear < margin).astype(jp.float32)
         priv = jp.concatenate(
             [

@@ -74,7 +74,7 @@ def control_step(
     velocity_limit: float = constants.VELOCITY_LIMIT_RADS,
     saturation_torque: float | None = 1.5 * constants.TORQUE_LIMIT_NM,
 ) -> tuple[mjx.Data, jax.Array]:
-    """Hold ``q_target`` for one control period: PD in JAX, then ``mjx.step``, ``num_substeps`` times.
+    """Hold ``q_target`` for one control period: (JAX PD, ``mjx.step``) x ``num_substeps``.
 
     Args:
       m: MJX model (joint order of foottof.robot.make_model: qpos[7:19], qvel[6:18]).
@@ -89,7 +89,13 @@ def control_step(
 
     def substep(d, _):
         tau = pd_torque(
-            q_target, d.qpos[7:19], d.qvel[6:18], kp, kd, torque_limit, velocity_limit,
+            q_target,
+            d.qpos[7:19],
+            d.qvel[6:18],
+            kp,
+            kd,
+            torque_limit,
+            velocity_limit,
             saturation_torque,
         )
         d = mjx.step(m, d.replace(ctrl=tau))

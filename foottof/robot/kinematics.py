@@ -79,13 +79,17 @@ def tof_site_rotation(leg: str, tof_tilt_deg: float) -> np.ndarray:
 def _rot_x(a: jax.Array) -> jax.Array:
     c, s = jp.cos(a), jp.sin(a)
     o, z = jp.ones_like(a), jp.zeros_like(a)
-    return jp.stack([jp.stack([o, z, z], -1), jp.stack([z, c, -s], -1), jp.stack([z, s, c], -1)], -2)
+    return jp.stack(
+        [jp.stack([o, z, z], -1), jp.stack([z, c, -s], -1), jp.stack([z, s, c], -1)], -2
+    )
 
 
 def _rot_y(a: jax.Array) -> jax.Array:
     c, s = jp.cos(a), jp.sin(a)
     o, z = jp.ones_like(a), jp.zeros_like(a)
-    return jp.stack([jp.stack([c, z, s], -1), jp.stack([z, o, z], -1), jp.stack([-s, z, c], -1)], -2)
+    return jp.stack(
+        [jp.stack([c, z, s], -1), jp.stack([z, o, z], -1), jp.stack([-s, z, c], -1)], -2
+    )
 
 
 def _leg_table(shank_scale: float, tof_tilt_deg: float) -> dict[str, np.ndarray]:
@@ -144,9 +148,7 @@ def quat_to_mat(quat: jax.Array) -> jax.Array:
     )
 
 
-def base_to_world(
-    pos_b: jax.Array, base_pos: jax.Array, base_quat: jax.Array
-) -> jax.Array:
+def base_to_world(pos_b: jax.Array, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
     """Points in the base frame -> world frame.
 
     Args:
@@ -162,7 +164,7 @@ def base_to_world(
 
 
 def rot_base_to_world(rot_b: jax.Array, base_quat: jax.Array) -> jax.Array:
-    """(..., K, 3, 3) frames in the base frame -> world frame, given (..., 4) base quat (w, x, y, z)."""
+    """(..., K, 3, 3) frames, base frame -> world frame; base_quat (..., 4) is (w, x, y, z)."""
     return quat_to_mat(base_quat)[..., None, :, :] @ rot_b
 
 
@@ -178,7 +180,9 @@ def world_foot_kinematics(
 
 
 def nominal_base_height(
-    q=constants.DEFAULT_POSE, shank_scale: float = 1.0, foot_radius_m: float = constants.FOOT_RADIUS_M
+    q=constants.DEFAULT_POSE,
+    shank_scale: float = 1.0,
+    foot_radius_m: float = constants.FOOT_RADIUS_M,
 ) -> float:
     """Base height [m] over flat ground at level base orientation with the lowest foot touching."""
     fk = forward_kinematics(np.asarray(q, dtype=np.float64), shank_scale)

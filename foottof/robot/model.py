@@ -13,11 +13,27 @@ from foottof.terrain.heightfield import Heightfield, hfield_xml, write_to_mjmode
 
 # Inertials, anymal.md §2-3 ([D] S6): mass [kg], COM [m] rel. to the body origin, inertia about the
 # COM in base-aligned axes (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) [kg m^2]. Leg figures are for LF.
-BASE_INERTIAL = (26.3631, (-0.0164, 0.0007, -0.0120), (0.2518, 1.4679, 1.5340, 0.0051, 0.0239, 0.0006))
+BASE_INERTIAL = (
+    26.3631,
+    (-0.0164, 0.0007, -0.0120),
+    (0.2518, 1.4679, 1.5340, 0.0051, 0.0239, 0.0006),
+)
 LEG_INERTIALS = {
-    "hip": (0.36586, (0.03505, -0.00123, 0.0), (2.385e-4, 5.582e-4, 4.433e-4, 3.26e-6, 1.3e-8, 1.8e-8)),
-    "thigh": (5.13220, (-0.00009, 0.09051, -0.14019), (0.1080, 0.1049, 0.01393, 1.42e-4, 4.03e-4, 0.02006)),
-    "shank": (0.79598, (0.05093, 0.00809, -0.09002), (0.01666, 0.01891, 2.531e-3, 5.43e-5, 3.549e-3, 6.23e-5)),
+    "hip": (
+        0.36586,
+        (0.03505, -0.00123, 0.0),
+        (2.385e-4, 5.582e-4, 4.433e-4, 3.26e-6, 1.3e-8, 1.8e-8),
+    ),
+    "thigh": (
+        5.13220,
+        (-0.00009, 0.09051, -0.14019),
+        (0.1080, 0.1049, 0.01393, 1.42e-4, 4.03e-4, 0.02006),
+    ),
+    "shank": (
+        0.79598,
+        (0.05093, 0.00809, -0.09002),
+        (0.01666, 0.01891, 2.531e-3, 5.43e-5, 3.549e-3, 6.23e-5),
+    ),
 }
 TOTAL_MASS_KG = BASE_INERTIAL[0] + 4 * sum(v[0] for v in LEG_INERTIALS.values())  # 51.539 kg
 
@@ -25,10 +41,10 @@ TOTAL_MASS_KG = BASE_INERTIAL[0] + 4 * sum(v[0] for v in LEG_INERTIALS.values())
 HAA_RANGE_LEFT = (-0.7854, 0.6109)
 FLEX_RANGE = (-9.4248, 9.4248)
 
-# Collision proxies: spheres only. MJX collides a geom with the hfield cells inside a square patch of
-# ceil(2 * rbound / cell) + 1 vertices per side, so the cost grows with (radius / cell)^2; the radii
-# are just below multiples of 2 cm so that on a 4 cm grid the patches are 3x3 (feet), 4x4 (knees)
-# and 5x5 (base) cells.
+# Collision proxies: spheres only. MJX collides a geom with a square patch of
+# ceil(2 * radius / cell) + 1 hfield cells per side (2 prisms per cell), so the cost grows with
+# (radius / cell)^2. The radii are just below multiples of 2 cm so that on a 4 cm grid the patches
+# are 3x3 (feet), 4x4 (knees) and 5x5 (base) cells.
 # Base: 4 spheres along the underside of the 0.894 x 0.16 x 0.256 m base box (centre z = +0.016,
 # bottom at z = -0.112): their bottoms touch the box bottom, together they span x = +-0.447.
 BASE_SPHERE_RADIUS_M = 0.0795
@@ -92,7 +108,8 @@ def _validate_tuning(tuning: dict) -> dict:
         raise ValueError(f"timestep={t['timestep']} outside (0, 0.01] s")
     if float(t["solref_timeconst"]) < 2 * float(t["timestep"]):
         raise ValueError(
-            f"solref_timeconst={t['solref_timeconst']} must be >= 2 * timestep = {2 * t['timestep']}"
+            f"solref_timeconst={t['solref_timeconst']} must be >= 2 * timestep "
+            f"= {2 * t['timestep']}"
         )
     return t
 
@@ -105,7 +122,8 @@ def _leg_xml(leg: str, shank_scale: float, tof_tilt_deg: float, foot_radius_m: f
     foot = shank_scale * kin.mirror(kin.KFE_TO_FOOT_M, leg)
     haa_range = HAA_RANGE_LEFT if sy > 0 else (-HAA_RANGE_LEFT[1], -HAA_RANGE_LEFT[0])
     inert = {
-        k: (m, kin.mirror(com, leg), _mirror_inertia(i, leg)) for k, (m, com, i) in LEG_INERTIALS.items()
+        k: (m, kin.mirror(com, leg), _mirror_inertia(i, leg))
+        for k, (m, com, i) in LEG_INERTIALS.items()
     }
     rot = kin.tof_site_rotation(leg, tof_tilt_deg)
     quat = np.zeros(4)
@@ -156,14 +174,17 @@ def make_model_xml(
 
     h0 = kin.nominal_base_height(constants.DEFAULT_POSE, shank_scale, foot_radius_m)
     key_qpos = _f([0.0, 0.0, h0, 1.0, 0.0, 0.0, 0.0, *constants.DEFAULT_POSE])
-    legs = "".join(_leg_xml(leg, shank_scale, tof_tilt_deg, foot_radius_m) for leg in constants.FEET)
+    legs = "".join(
+        _leg_xml(leg, shank_scale, tof_tilt_deg, foot_radius_m) for leg in constants.FEET
+    )
     base_spheres = "".join(
-        f'<geom name="base_{i}" class="body_collision" pos="{_f(c)}" size="{BASE_SPHERE_RADIUS_M}"/>'
+        f'<geom name="base_{i}" class="body_collision" pos="{_f(c)}" '
+        f'size="{BASE_SPHERE_RADIUS_M}"/>'
         for i, c in enumerate(BASE_SPHERE_CENTRES_M)
     )
+    ctrlrange = _f([-constants.TORQUE_LIMIT_NM, constants.TORQUE_LIMIT_NM])
     actuators = "".join(
-        f'<motor name="{j}" joint="{j}" ctrlrange="{_f([-constants.TORQUE_LIMIT_NM, constants.TORQUE_LIMIT_NM])}"/>'
-        for j in constants.JOINT_NAMES
+        f'<motor name="{j}" joint="{j}" ctrlrange="{ctrlrange}"/>' for j in constants.JOINT_NAMES
     )
     solref = _f([t["solref_timeconst"], t["solref_dampratio"]])
     eulerdamp = "enable" if t["eulerdamp"] else "disable"
@@ -238,7 +259,11 @@ def make_model(
       The compiled ``mujoco.MjModel``.
     """
     xml = make_model_xml(
-        hfield, shank_scale=shank_scale, tof_tilt_deg=tof_tilt_deg, foot_radius_m=foot_radius_m, **tuning
+        hfield,
+        shank_scale=shank_scale,
+        tof_tilt_deg=tof_tilt_deg,
+        foot_radius_m=foot_radius_m,
+        **tuning,
     )
     m = mujoco.MjModel.from_xml_string(xml)
     if hfield is not None:

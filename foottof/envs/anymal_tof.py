@@ -288,8 +288,11 @@ class AnymalToFEnv(Env):
         ecfg = self.cfg.env
         qpos = d.qpos
         base_pos, base_quat = qpos[0:3], qpos[3:7]
-        from foottof.robot.model import BASE_SPHERE_CENTRES_M, BASE_SPHERE_RADIUS_M
-        from foottof.robot.model import KNEE_SPHERE_RADIUS_M
+        from foottof.robot.model import (
+            BASE_SPHERE_CENTRES_M,
+            BASE_SPHERE_RADIUS_M,
+            KNEE_SPHERE_RADIUS_M,
+        )
 
         centres = kinematics.base_to_world(
             jp.asarray(BASE_SPHERE_CENTRES_M, jp.float32), base_pos, base_quat

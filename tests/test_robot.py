@@ -1,4 +1,4 @@
-"""Tests of foottof.robot against MuJoCo C (mj_kinematics, mj_collision) and hand-computed values."""
+"""Tests of foottof.robot against MuJoCo C (mj_kinematics, collisions) and hand-computed values."""
 
 import math
 

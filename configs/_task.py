@@ -8,6 +8,9 @@ def add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     e.source = "tof"  # foot-reading source: tof | mock_ideal | mock_aggre
     e.episode_length_s = 10.0  # episode length: the goal is ~3.9 m away on a 6 m tile [s]
     e.clip_actions = 5.0  # actions are clipped to +-this before scaling [-]
+    e.clip_observations = 100.0  # observations are clipped to +-this (rsl_rl convention) [-]
+    e.clip_reward = 100.0  # each scaled reward term is clipped to +-this per step [-]
+    e.max_joint_speed_rads = 100.0  # faster joints/base mean the simulation diverged: fail [rad/s]
     e.contact_margin_m = 0.01  # a foot within this of the surface counts as in contact [m]
     e.body_contact_margin_m = 0.0  # base/knee sphere clearance below this terminates [m]
     e.fall_height_above_floor_m = 0.5  # base below pit floor + this terminates (fell in a gap) [m]

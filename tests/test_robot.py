@@ -313,7 +313,7 @@ def _stand(hfield, seconds):
     mx = mjx.put_model(m)
     ground_z = 0.0 if hfield is None else STAND_HF_Z
     qpos = default_qpos(base_height=ground_z + nominal_base_height() + 0.02)  # drop from 2 cm
-    d0 = mjx.forward(mx, mjx.make_data(mx).replace(qpos=jp.asarray(qpos, jp.float32)))
+    d0 = jax.jit(mjx.forward)(mx, mjx.make_data(mx).replace(qpos=jp.asarray(qpos, jp.float32)))
     foot_ids = _ids(m, mujoco.mjtObj.mjOBJ_GEOM, constants.FOOT_GEOMS)
     target = jp.asarray(constants.DEFAULT_POSE, jp.float32)
     cfg = _env.get_control_section()

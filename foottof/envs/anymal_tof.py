@@ -177,7 +177,17 @@ class AnymalToFEnv(Env):
         kp = float(ccfg.pop("kp")) * p.kp_scale * p.motor_strength
         kd = float(ccfg.pop("kd")) * p.kd_scale * p.motor_strength
         d, taus = control.control_step(mx, d, q_target, kp, kd, **ccfg)
-        d = d.replace(qpos=jp.nan_to_num(d.qpos), qvel=jp.nan_to_num(d.qvel))
+        # A diverged simulation (non-finite or absurd velocities) ends the episode as a failure;
+        # sanitize so that no inf/NaN reaches rewards or observations before the auto-reset.
+        max_speed = float(self.cfg.env.max_joint_speed_rads)
+        diverged = ~(jp.all(jp.isfinite(d.qpos)) & jp.all(jp.isfinite(d.qvel)))
+        diverged = diverged | (jp.max(jp.abs(jp.nan_to_num(d.qvel))) > max_speed)
+        d = d.replace(
+            qpos=jp.nan_to_num(d.qpos),
+            qvel=jp.clip(jp.nan_to_num(d.qvel), -max_speed, max_speed),
+            qacc_warmstart=jp.nan_to_num(d.qacc_warmstart),
+        )
+        taus = jp.nan_to_num(taus)
         step = task.step + 1
 
         # Kinematics for rewards / terminations (analytic FK on the physics model).
@@ -190,7 +200,7 @@ class AnymalToFEnv(Env):
         contact = (foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m))
         contact = contact.astype(jp.float32)
         gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
-        failed = self._failed(d, gravity, foot_pos)
+        failed = self._failed(d, gravity, foot_pos) | diverged
         truncated = (step >= self.episode_steps) & ~failed
         done = failed | truncated
         dist = jp.linalg.norm(task.goal - base_pos[:2])
@@ -216,6 +226,8 @@ class AnymalToFEnv(Env):
         terms = rw.scaled_terms(
             rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
         )
+        clip = float(self.cfg.env.clip_reward)
+        terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
         reward = sum(terms.values())
         success = (truncated & (dist < float(self.cfg.reward.success_radius_m))).astype(jp.float32)
 
@@ -469,7 +481,11 @@ class AnymalToFEnv(Env):
                 p.added_mass_kg[None] * 0.1,  # 1
             ]
         )
-        return {"state": state_obs, "privileged_state": priv}
+        lim = float(self.cfg.env.clip_observations)
+        return {
+            "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),
+            "privileged_state": jp.clip(jp.nan_to_num(priv), -lim, lim),
+        }
 
 
 def _euler_to_quat(roll, pitch, yaw) -> jax.Array:

@@ -13,6 +13,7 @@ def get_model_section() -> ml_collections.ConfigDict:
     m.foot_friction = 1.0  # foot sliding friction coefficient [-]
     m.body_friction = 0.6  # base/knee sphere sliding friction coefficient [-]
     m.body_condim = 3  # contact dimension of base/knee spheres: 1 (frictionless) or 3
+    m.body_collision = True  # base/knee spheres collide with the terrain (False: ~3x faster MJX)
     m.solref_timeconst = 0.02  # contact stiffness time constant [s], >= 2 * timestep
     m.solref_dampratio = 1.0  # contact damping ratio [-]
     m.solver = "newton"  # MuJoCo constraint solver: newton | cg

@@ -362,3 +362,20 @@ def test_pd_standing_plane_20s():
 def test_pd_standing_flat_hfield_20s():
     hf = Heightfield(heights=jp.full((60, 60), STAND_HF_Z), x0_m=-1.2, y0_m=-1.2, cell_m=0.04)
     _check_standing(*_stand(hf, 20.0))
+
+
+def test_body_collision_off_keeps_geoms_feet_only():
+    m = make_model(body_collision=False)
+    d = mujoco.MjData(m)
+    assert m.geom("LF_knee").id >= 0 and m.geom("base_0").id >= 0
+    rng = np.random.default_rng(1)
+    feet = set(_ids(m, mujoco.mjtObj.mjOBJ_GEOM, constants.FOOT_GEOMS))
+    hits = 0
+    for _ in range(200):
+        d.qpos[:] = default_qpos(base_height=rng.uniform(0.05, 0.4))
+        d.qpos[7:] = rng.uniform(-math.pi, math.pi, 12)
+        mujoco.mj_forward(m, d)
+        for c in d.contact[: d.ncon]:
+            assert {c.geom1, c.geom2} - {m.geom("terrain").id} <= feet
+        hits += d.ncon
+    assert hits > 0

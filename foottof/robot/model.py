@@ -62,6 +62,7 @@ DEFAULT_TUNING = {
     "foot_friction": 1.0,  # sliding friction coefficient of the foot spheres [-]
     "body_friction": 0.6,  # sliding friction coefficient of base and knee spheres [-]
     "body_condim": 3,  # contact dimension of base and knee spheres: 1 frictionless | 3
+    "body_collision": True,  # base/knee spheres collide (False: kept, named, but not colliding)
     "solref_timeconst": 0.02,  # contact solref[0] time constant [s] (>= 2 * timestep)
     "solref_dampratio": 1.0,  # contact solref[1] damping ratio [-]
     "solver": "newton",  # constraint solver: newton | cg
@@ -72,7 +73,12 @@ DEFAULT_TUNING = {
     "eulerdamp": False,  # implicit joint damping in the Euler integrator (off: faster)
     "timestep": constants.PHYSICS_DT_S,  # physics step [s]
 }
-_CHOICES = {"solver": ("newton", "cg"), "cone": ("pyramidal", "elliptic"), "body_condim": (1, 3)}
+_CHOICES = {
+    "solver": ("newton", "cg"),
+    "cone": ("pyramidal", "elliptic"),
+    "body_condim": (1, 3),
+    "body_collision": (True, False),
+}
 _SOLVER_MJCF = {"newton": "Newton", "cg": "CG"}
 
 
@@ -188,6 +194,7 @@ def make_model_xml(
     )
     solref = _f([t["solref_timeconst"], t["solref_dampratio"]])
     eulerdamp = "enable" if t["eulerdamp"] else "disable"
+    body_con = 1 if t["body_collision"] else 0
     return f"""<mujoco model="anymal_d">
   <compiler angle="radian" autolimits="true"/>
   <option timestep="{_f(t["timestep"])}" integrator="Euler" solver="{_SOLVER_MJCF[t["solver"]]}"
@@ -202,7 +209,7 @@ def make_model_xml(
       <geom contype="0" conaffinity="0" group="1" density="0" rgba="0.3 0.3 0.3 1"/>
     </default>
     <default class="body_collision">
-      <geom type="sphere" contype="1" conaffinity="0" condim="{int(t["body_condim"])}" group="3"
+      <geom type="sphere" contype="{body_con}" conaffinity="0" condim="{int(t["body_condim"])}" group="3"
             friction="{_f(t["body_friction"])} 0.005 0.0001" rgba="0.8 0.3 0.3 0.4"/>
     </default>
     <default class="foot">

@@ -1,0 +1,220 @@
+"""Tests of the robustness evaluation (foottof/eval/robustness.py, plots.py, evaluate.py).
+
+One env compile: the end-to-end cell (4 envs, 0.5 s episodes, untrained policy) in a module
+fixture; everything else is pure NumPy or fails before any compile.
+"""
+
+import csv
+import json
+import math
+import os
+import subprocess
+import sys
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+
+from configs import smoke
+from foottof.eval import plots
+from foottof.eval import robustness as rb
+
+REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+
+def tiny_cfg():
+    c = smoke.get_config()
+    c.env.episode_length_s = 0.5  # 25 control steps
+    c.eval.episodes = 4
+    c.eval.num_envs = 4
+    c.eval.num_levels = 2
+    c.eval.num_cols = 5
+    return c
+
+
+# ---------------------------------------------------------------------------------------------
+# Pure functions
+def test_first_episode_outcomes_hand_checked():
+    # 5 steps x 4 envs. env0: fails at t=1, later auto-reset episode succeeds at t=4 (ignored).
+    # env1: success at its first done t=4. env2: truncated at t=3 without success.
+    # env3: never done.
+    done = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0], [0, 0, 1, 0], [1, 1, 0, 0]])
+    success = np.array([[0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0], [1, 1, 0, 0]])
+    failed = np.array([[0, 0, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0], [0, 0, 0, 0]])
+    speed = np.arange(20, dtype=float).reshape(5, 4)
+    out = rb.first_episode_outcomes(done, success, failed, speed)
+    np.testing.assert_array_equal(out["finished"], [True, True, True, False])
+    np.testing.assert_array_equal(out["success"], [False, True, False, False])
+    np.testing.assert_array_equal(out["failed"], [True, False, False, False])
+    np.testing.assert_array_equal(out["length"], [2, 5, 4, 5])
+    # env0: mean(0, 4) = 2; env1: mean(1,5,9,13,17) = 9; env2: mean(2,6,10,14) = 8
+    np.testing.assert_allclose(out["mean_speed_ms"], [2.0, 9.0, 8.0, 9.0 + 2.0])
+    row = rb.summarize("tof", "none", 0.0, out)
+    assert (row["episodes"], row["successes"], row["falls"]) == (4, 1, 1)
+    assert row["success_rate"] == 0.25
+
+
+def test_first_episode_outcomes_random_property():
+    rng = np.random.default_rng(0)
+    for _ in range(50):
+        t, b = rng.integers(1, 12), rng.integers(1, 9)
+        done = rng.random((t, b)) < 0.3
+        success = done & (rng.random((t, b)) < 0.5)
+        out = rb.first_episode_outcomes(done, success, np.zeros((t, b)), np.ones((t, b)))
+        for j in range(b):
+            idx = np.flatnonzero(done[:, j])
+            assert out["success"][j] == (bool(success[idx[0], j]) if idx.size else False)
+        np.testing.assert_allclose(out["mean_speed_ms"], 1.0)
+
+
+def test_wilson_interval_hand_computed():
+    # 8 / 10, z = 1.96: centre = (0.8 + 0.19208) / 1.38416 = 0.716738,
+    # half = 1.96 * sqrt(0.016 + 0.009604) / 1.38416 = 0.226581 -> [0.49016, 0.94332]
+    lo, hi = rb.wilson_interval(8, 10)
+    assert lo == pytest.approx(0.49016, abs=2e-5)
+    assert hi == pytest.approx(0.94332, abs=2e-5)
+    assert rb.wilson_interval(0, 0) == (0.0, 1.0)
+    lo, hi = rb.wilson_interval(0, 20)
+    assert lo == 0.0 and hi == pytest.approx(3.8415 / (20 + 3.8415), abs=1e-4)
+    with pytest.raises(ValueError, match="successes=5, n=3"):
+        rb.wilson_interval(5, 3)
+
+
+def test_check_inputs():
+    assert rb.check_source("all") == ("tof", "mock_ideal", "mock_aggre")
+    with pytest.raises(ValueError, match=r"unknown source 'lidar'.*mock_aggre"):
+        rb.check_source("lidar")
+    with pytest.raises(ValueError, match=r"unknown perturbation 'wind'.*odometry"):
+        rb.check_levels("wind", [0.0])
+    with pytest.raises(ValueError, match=r"joint_offset level 0.5 outside .*\[0.0, 0.3\]"):
+        rb.check_levels("joint_offset", [0.1, 0.5])
+    with pytest.raises(ValueError, match=r"shank_length level 0.7 outside .*\[0.8, 1.2\]"):
+        rb.check_levels("shank_length", ["0.7"])
+    with pytest.raises(ValueError, match=r"odometry level 11.0 outside .*\[0.0, 10.0\]"):
+        rb.check_levels("odometry", [11])
+    with pytest.raises(ValueError, match=r"odometry level 'x'"):
+        rb.check_levels("odometry", ["x"])
+    assert rb.check_levels("odometry", ["0", "2.5"]) == (0.0, 2.5)
+    assert rb.check_levels("none", []) == (0.0,)
+
+
+def test_robustness_png_panels_without_data():
+    rows = [
+        {"source": s, "perturbation": "odometry", "level": lv, "episodes": 10, "successes": k,
+         "success_rate": k / 10, "ci_low": rb.wilson_interval(k, 10)[0],
+         "ci_high": rb.wilson_interval(k, 10)[1], "mean_speed_ms": 0.5, "falls": 1}
+        for s in ("tof", "mock_aggre") for lv, k in ((0.0, 9), (2.0, 5))
+    ]
+    png = plots.robustness_png(rows)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png != plots.robustness_png([])
+
+
+def test_write_atomic_leaves_nothing_on_error(tmp_path):
+    good = str(tmp_path / "a.json")
+    bad = str(tmp_path / "missing_dir_is_a_file" / "b.csv")
+    (tmp_path / "missing_dir_is_a_file").write_text("x")  # a file where a folder is needed
+    with pytest.raises(OSError):
+        rb.write_atomic({good: b"{}", bad: b"x"})
+    assert sorted(os.listdir(tmp_path)) == ["missing_dir_is_a_file"]
+
+
+# ---------------------------------------------------------------------------------------------
+# CLI errors (no env compile: they fail on the flags)
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--source", "lidar"], "unknown source 'lidar'"),
+        (["--perturbation", "wind"], "unknown perturbation 'wind'"),
+        (["--perturbation", "joint_offset", "--levels", "0,0.4"], "joint_offset level 0.4"),
+        (["--checkpoint", "/nonexistent/run"], "'/nonexistent/run' does not exist"),
+    ],
+)
+def test_cli_bad_input(args, message, tmp_path):
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    p = subprocess.run(
+        [sys.executable, os.path.join(REPO, "evaluate.py"), "--out", str(tmp_path), *args],
+        cwd=REPO, capture_output=True, text=True, env=env, timeout=300,
+    )
+    assert p.returncode != 0
+    err_lines = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
+    assert len(err_lines) == 1 and message in err_lines[0], p.stderr[-2000:]
+
+
+# ---------------------------------------------------------------------------------------------
+# End to end (one env compile)
+@pytest.fixture(scope="module")
+def e2e(tmp_path_factory):
+    cfg = tiny_cfg()
+    out = str(tmp_path_factory.mktemp("eval"))
+    row = rb.evaluate_cell(cfg, "mock_ideal", "odometry", 2.0, None, jax.random.PRNGKey(0))
+    doc = rb.results_document([row], None, cfg.env.episode_length_s)
+    paths = rb.write_results(out, "mock_ideal", "odometry", doc)
+    return cfg, out, row, paths
+
+
+def test_end_to_end_writes_outputs(e2e):
+    _, out, row, paths = e2e
+    assert sorted(os.listdir(out)) == [
+        "results_mock_ideal_odometry.csv", "results_mock_ideal_odometry.json", "robustness.png"
+    ]
+    with open(paths["json"]) as f:
+        doc = json.load(f)
+    assert tuple(doc) == rb.TOP_KEYS  # schema: exact key sets
+    assert len(doc["results"]) == 1 and tuple(doc["results"][0]) == rb.RESULT_KEYS
+    r = doc["results"][0]
+    assert r["episodes"] == 4 and 0 <= r["successes"] <= 4 and 0 <= r["falls"] <= 4
+    assert (r["source"], r["perturbation"], r["level"]) == ("mock_ideal", "odometry", 2.0)
+    assert r["ci_low"] <= r["success_rate"] <= r["ci_high"]
+    assert math.isfinite(r["mean_speed_ms"]) and r["mean_speed_ms"] >= 0
+    with open(paths["csv"]) as f:
+        rows = list(csv.DictReader(f))
+    assert tuple(rows[0]) == rb.RESULT_KEYS and int(rows[0]["episodes"]) == 4
+    with open(paths["png"], "rb") as f:
+        assert f.read(8) == b"\x89PNG\r\n\x1a\n"
+    assert "mock_ideal" in rb.format_table([row])
+
+
+def _save_checkpoint(run_dir, params, normalizer):
+    from foottof.ppo.checkpoint import Checkpointer
+    from foottof.ppo.train import TrainState
+
+    z = jp.zeros(1)
+    state = TrainState(params=params, opt_state=z, normalizer=normalizer, env_state=z, carry=z,
+                       prev_done=z, ep_return=z, ep_length=z, key=jax.random.PRNGKey(0),
+                       iteration=jp.asarray(1, jp.int32))
+    ck = Checkpointer(run_dir, save_env_state=False)
+    ck.save(state)
+    ck.close()
+
+
+def test_checkpoint_layout_mismatch_and_roundtrip(e2e, tmp_path):
+    from foottof.envs import make_env
+    from foottof.ppo.networks import make_networks
+
+    cfg = e2e[0]
+    c, _ = rb.eval_config(cfg, "none", 0.0)
+    env = make_env(c, source="tof", terrain_map=rb.eval_terrain_map(c, jax.random.PRNGKey(0)))
+    sizes = env.observation_size  # eval_shape, no compile
+    obs = {k: jp.zeros((1, n)) for k, n in sizes.items()}
+    nets = make_networks(env.action_size, c.network)
+    key = jax.random.PRNGKey(1)
+    # A checkpoint of a different observation layout (8 fewer actor inputs).
+    other = {k: jp.zeros((1, n - 8)) for k, n in sizes.items()}
+    _save_checkpoint(str(tmp_path / "other"), nets.init_params(key, other),
+                     nets.init_normalizer(other))
+    with pytest.raises(ValueError, match=rf"observation sizes .*{sizes['state']}.*checkpoint"):
+        rb.load_policy(c, env, obs, str(tmp_path / "other"), key)
+    with pytest.raises(FileNotFoundError, match="does not exist"):
+        rb.load_policy(c, env, obs, str(tmp_path / "nowhere"), key)
+    # Matching layout: restored values equal the saved ones.
+    params = nets.init_params(jax.random.PRNGKey(7), obs)
+    _save_checkpoint(str(tmp_path / "same"), params, nets.init_normalizer(obs))
+    _, restored, _ = rb.load_policy(c, env, obs, str(tmp_path / "same"), key)
+    for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(restored), strict=True):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    assert rb.find_checkpoint(str(tmp_path)) is None  # no runs/ there
+    os.makedirs(tmp_path / "runs")
+    os.rename(tmp_path / "same", tmp_path / "runs" / "same")
+    assert rb.find_checkpoint(str(tmp_path)) == str(tmp_path / "runs" / "same")

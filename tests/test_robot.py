@@ -379,3 +379,41 @@ def test_body_collision_off_keeps_geoms_feet_only():
             assert {c.geom1, c.geom2} - {m.geom("terrain").id} <= feet
         hits += d.ncon
     assert hits > 0
+
+
+def test_mjx_forward_matches_mujoco_c(m_plane):
+    """MJX (float32) joint accelerations equal MuJoCo C's, in the air and with feet in contact."""
+    m = m_plane
+    mx = mjx.put_model(m)
+    fwd = jax.jit(mjx.forward)
+    rng = np.random.default_rng(0)
+    for base_height, min_contacts in ((2.0, 0), (0.585, 2)):
+        d = mujoco.MjData(m)
+        d.qpos[:] = default_qpos(base_height=base_height)
+        d.qpos[7:] += rng.uniform(-0.1, 0.1, 12)
+        d.qvel[:] = rng.normal(0.0, 0.3, 18)
+        d.ctrl[:] = rng.uniform(-30.0, 30.0, 12)
+        mujoco.mj_forward(m, d)
+        assert d.ncon >= min_contacts
+        dx = fwd(mx, mjx.put_data(m, d))
+        scale = np.abs(d.qacc).max()
+        np.testing.assert_allclose(dx.qacc, d.qacc, atol=1e-5 * scale)
+
+
+def test_contact_parameters_come_from_robot_geoms():
+    """Foot contacts use foot_friction, base/knee contacts body_friction and body_condim."""
+    m = make_model(foot_friction=0.7, body_friction=0.3, body_condim=1)
+    d = mujoco.MjData(m)
+    d.qpos[:] = default_qpos(base_height=0.05)  # base and knees pushed into the ground
+    mujoco.mj_forward(m, d)
+    kinds = set()
+    for c in d.contact[: d.ncon]:
+        name = m.geom(c.geom2 if c.geom1 == m.geom("terrain").id else c.geom1).name
+        foot = name in constants.FOOT_GEOMS
+        kinds.add("foot" if foot else name.split("_")[0] if name.startswith("base") else "knee")
+        assert c.dim == (3 if foot else 1)
+        if foot:
+            assert c.friction[0] == pytest.approx(0.7)
+        else:
+            assert c.friction[0] == pytest.approx(0.3)
+    assert kinds == {"foot", "base", "knee"}

@@ -209,8 +209,9 @@ def make_model_xml(
       <geom contype="0" conaffinity="0" group="1" density="0" rgba="0.3 0.3 0.3 1"/>
     </default>
     <default class="body_collision">
-      <geom type="sphere" contype="{body_con}" conaffinity="0" condim="{int(t["body_condim"])}" group="3"
-            friction="{_f(t["body_friction"])} 0.005 0.0001" rgba="0.8 0.3 0.3 0.4"/>
+      <geom type="sphere" contype="{body_con}" conaffinity="0" condim="{int(t["body_condim"])}"
+            priority="1" group="3" friction="{_f(t["body_friction"])} 0.005 0.0001"
+            rgba="0.8 0.3 0.3 0.4"/>
     </default>
     <default class="foot">
       <geom type="sphere" contype="1" conaffinity="0" condim="3" priority="1"

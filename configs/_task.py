@@ -20,8 +20,6 @@ def add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     e.init_roll_pitch_rad = 0.0  # initial roll, pitch ~ U(+-this) [rad] (wider in stage 2)
     e.spawn_height_offset_m = 0.02  # spawn the feet this high above the platform [m]
     e.push_interval_s = 6.0  # mean time between random pushes [s]
-    e.odometry_lin_noise_ms = 0.1  # 100% odometry noise: U(+-this) per axis on lin vel [m/s]
-    e.odometry_ang_noise_rads = 0.2  # 100% odometry noise: U(+-this) per axis on ang vel [rad/s]
     r = ml_collections.ConfigDict()
     r.enabled = True  # per-episode domain randomization on/off
     r.nominal_friction = 1.0  # foot friction when randomization is off [-]

@@ -153,7 +153,8 @@ def test_fk_matches_mj_kinematics(shank_scale):
     base_quat /= np.linalg.norm(base_quat, axis=1, keepdims=True)
     foot_ids = _ids(m, mujoco.mjtObj.mjOBJ_GEOM, constants.FOOT_GEOMS)
     site_ids = _ids(m, mujoco.mjtObj.mjOBJ_SITE, constants.TOF_SITES)
-    ref = {k: np.zeros((n, 4, 3)) for k in ("foot_b", "foot_w", "tof_w")}
+    knee_ids = _ids(m, mujoco.mjtObj.mjOBJ_GEOM, tuple(f"{leg}_knee" for leg in constants.FEET))
+    ref = {k: np.zeros((n, 4, 3)) for k in ("foot_b", "foot_w", "tof_w", "knee_b", "knee_w")}
     ref_rot = {k: np.zeros((n, 4, 3, 3)) for k in ("rot_b", "rot_w")}
     for i in range(n):
         for frame in ("b", "w"):
@@ -162,6 +163,7 @@ def test_fk_matches_mj_kinematics(shank_scale):
             d.qpos[3:7] = base_quat[i] if frame == "w" else (1, 0, 0, 0)
             mujoco.mj_kinematics(m, d)
             ref[f"foot_{frame}"][i] = d.geom_xpos[foot_ids]
+            ref[f"knee_{frame}"][i] = d.geom_xpos[knee_ids]
             ref_rot[f"rot_{frame}"][i] = d.site_xmat[site_ids].reshape(4, 3, 3)
             if frame == "w":
                 ref["tof_w"][i] = d.site_xpos[site_ids]
@@ -169,11 +171,13 @@ def test_fk_matches_mj_kinematics(shank_scale):
     np.testing.assert_allclose(fk.foot_pos, ref["foot_b"], atol=1e-5)
     np.testing.assert_allclose(fk.tof_pos, ref["foot_b"], atol=1e-5)
     np.testing.assert_allclose(fk.tof_rot, ref_rot["rot_b"], atol=1e-5)
+    np.testing.assert_allclose(fk.knee_pos, ref["knee_b"], atol=1e-5)
     qpos = np.concatenate([base_pos, base_quat, q], axis=1)
     fkw = world_foot_kinematics(jp.asarray(qpos), shank_scale, tilt)
     np.testing.assert_allclose(fkw.foot_pos, ref["foot_w"], atol=1e-5)
     np.testing.assert_allclose(fkw.tof_pos, ref["tof_w"], atol=1e-5)
     np.testing.assert_allclose(fkw.tof_rot, ref_rot["rot_w"], atol=1e-5)
+    np.testing.assert_allclose(fkw.knee_pos, ref["knee_w"], atol=1e-5)
 
 
 def test_shank_scale_scales_kfe_to_foot_only():

@@ -15,9 +15,15 @@ from mujoco import mjx
 from foottof import constants
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
-from foottof.envs.randomization import EpisodeParams, odometry_noise, sample_episode_params
+from foottof.envs.randomization import EpisodeParams, sample_episode_params
+from foottof.eval.elevation_map import noisy_odometry
 from foottof.robot import control, kinematics
-from foottof.robot.model import make_model
+from foottof.robot.model import (
+    BASE_SPHERE_CENTRES_M,
+    BASE_SPHERE_RADIUS_M,
+    KNEE_SPHERE_RADIUS_M,
+    make_model,
+)
 from foottof.terrain import curriculum
 from foottof.terrain.terrain_map import (
     TerrainMap,
@@ -47,9 +53,7 @@ class TaskState:
       level, col: curriculum level and terrain column of the current tile (int32).
       spawn: (4,) spawn x, y, yaw, surface z; goal: (2,) goal x, y [m].
       last_action: (12,) previous action; last_qvel: (12,) joint velocities one step ago.
-      last_torque: (12,) torques of the last substep [N m].
       params: per-episode randomization.
-      min_goal_dist: smallest goal distance reached this episode [m].
     """
 
     rng: jax.Array
@@ -60,9 +64,7 @@ class TaskState:
     goal: jax.Array
     last_action: jax.Array
     last_qvel: jax.Array
-    last_torque: jax.Array
     params: EpisodeParams
-    min_goal_dist: jax.Array
 
 
 def _yaw_quat(yaw):
@@ -193,14 +195,13 @@ class AnymalToFEnv(Env):
         # Kinematics for rewards / terminations (analytic FK on the physics model).
         qpos, qvel = d.qpos, d.qvel
         base_pos, base_quat = qpos[0:3], qpos[3:7]
-        fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
+        fk, foot_vel = self._foot_kinematics(d)
         foot_pos = fk.foot_pos  # (4, 3)
-        foot_vel = self._foot_velocities(d)
         foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
         contact = (foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m))
         contact = contact.astype(jp.float32)
         gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
-        failed = self._failed(d, gravity, foot_pos) | diverged
+        failed = self._failed(d, gravity, fk) | diverged
         truncated = (step >= self.episode_steps) & ~failed
         done = failed | truncated
         dist = jp.linalg.norm(task.goal - base_pos[:2])
@@ -237,10 +238,8 @@ class AnymalToFEnv(Env):
             step=step,
             last_action=action,
             last_qvel=qvel[6:18],
-            last_torque=taus[-1],
-            min_goal_dist=jp.minimum(task.min_goal_dist, dist),
         )
-        new_level, new_col = self._curriculum(key_reset, task, dist, success)
+        new_level, new_col = self._curriculum(key_reset, task, base_pos[:2], success)
         fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
         sel = lambda a, b: jax.tree_util.tree_map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
         next_task = sel(fresh_task, cont)
@@ -256,7 +255,7 @@ class AnymalToFEnv(Env):
                 "episode/success": success,
                 "episode/failed": failed.astype(jp.float32),
                 "episode/goal_dist_m": dist,
-                "episode/progress": self._progress(task, dist),
+                "episode/progress": self._progress(task, base_pos[:2]),
                 "curriculum/level": task.level.astype(jp.float32),
                 "episode/speed_ms": jp.linalg.norm(qvel[0:2]),
             }
@@ -280,68 +279,46 @@ class AnymalToFEnv(Env):
         mass = self.mx.body_mass.at[self._base_body_id].set(self._base_mass + p.added_mass_kg)
         return self.mx.replace(geom_friction=fr, body_mass=mass)
 
-    def _foot_velocities(self, d) -> jax.Array:
-        """(4, 3) world foot-centre velocities from the base twist and joint rates (FK Jacobian)."""
+    def _foot_kinematics(self, d) -> tuple[kinematics.FootKinematics, jax.Array]:
+        """World FK of the physics model and (4, 3) world foot-centre velocities (FK Jacobian)."""
         qpos, qvel = d.qpos, d.qvel
 
-        def feet_world(q):
-            return kinematics.world_foot_kinematics(
-                jp.concatenate([qpos[:7], q]), self.shank_scale
-            ).foot_pos
+        def fk_world(q):
+            return kinematics.world_foot_kinematics(jp.concatenate([qpos[:7], q]), self.shank_scale)
 
-        fk, dfk = jax.jvp(feet_world, (qpos[7:19],), (qvel[6:18],))
-        rot = kinematics.quat_to_mat(qpos[3:7])
-        omega_w = rot @ qvel[3:6]  # free-joint angular velocity is in the body frame
-        lever = fk - qpos[0:3]
-        return qvel[0:3] + jp.cross(omega_w, lever) + dfk
+        fk, dfk = jax.jvp(fk_world, (qpos[7:19],), (qvel[6:18],))
+        omega_w = kinematics.quat_to_mat(qpos[3:7]) @ qvel[3:6]  # free-joint ang. vel. is body-frame
+        lever = fk.foot_pos - qpos[0:3]
+        return fk, qvel[0:3] + jp.cross(omega_w, lever) + dfk.foot_pos
 
-    def _failed(self, d, gravity, foot_pos) -> jax.Array:
+    def _failed(self, d, gravity, fk: kinematics.FootKinematics) -> jax.Array:
         """Base or knee touches the terrain, robot falls into a gap, or bad orientation."""
         ecfg = self.cfg.env
-        qpos = d.qpos
-        base_pos, base_quat = qpos[0:3], qpos[3:7]
-        from foottof.robot.model import (
-            BASE_SPHERE_CENTRES_M,
-            BASE_SPHERE_RADIUS_M,
-            KNEE_SPHERE_RADIUS_M,
-        )
-
+        base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
         centres = kinematics.base_to_world(
             jp.asarray(BASE_SPHERE_CENTRES_M, jp.float32), base_pos, base_quat
         )
         base_clear = centres[:, 2] - self.hfield.height_at(centres[:, :2]) - BASE_SPHERE_RADIUS_M
-        knees = self._knee_positions(qpos)
+        knees = fk.knee_pos
         knee_clear = knees[:, 2] - self.hfield.height_at(knees[:, :2]) - KNEE_SPHERE_RADIUS_M
         body_contact = (jp.min(base_clear) < float(ecfg.body_contact_margin_m)) | (
             jp.min(knee_clear) < float(ecfg.body_contact_margin_m)
         )
         fell = base_pos[2] < self.hfield.z_floor_m + float(ecfg.fall_height_above_floor_m)
-        fell = fell | (jp.min(foot_pos[:, 2]) < float(ecfg.foot_fall_z_m))
+        fell = fell | (jp.min(fk.foot_pos[:, 2]) < float(ecfg.foot_fall_z_m))
         flipped = gravity[2] > -math.cos(math.radians(float(ecfg.max_tilt_deg)))
-        bad = ~jp.all(jp.isfinite(d.qpos)) | ~jp.all(jp.isfinite(d.qvel))
-        return body_contact | fell | flipped | bad
+        return body_contact | fell | flipped
 
-    def _knee_positions(self, qpos) -> jax.Array:
-        """(4, 3) world positions of the KFE axes (knee spheres)."""
-        t = kinematics._leg_table(self.shank_scale, constants.TOF_TILT_DEG)
-        q = qpos[7:19].reshape(4, 3)
-        r_haa = kinematics._rot_x(q[:, 0])
-        r_thigh = r_haa @ kinematics._rot_y(q[:, 1])
-        p_thigh = t["hip"] + jp.einsum("kij,kj->ki", r_haa, t["hfe"])
-        knee_b = p_thigh + jp.einsum("kij,kj->ki", r_thigh, t["kfe"])
-        return kinematics.base_to_world(knee_b, qpos[0:3], qpos[3:7])
+    def _progress(self, task: TaskState, base_xy) -> jax.Array:
+        return curriculum.progress_fraction(task.spawn[:2], task.goal, base_xy)
 
-    def _progress(self, task: TaskState, dist) -> jax.Array:
-        start = jp.linalg.norm(task.goal - task.spawn[:2])
-        return 1.0 - dist / jp.maximum(start, 1e-3)
-
-    def _curriculum(self, key, task: TaskState, dist, success):
+    def _curriculum(self, key, task: TaskState, base_xy, success):
         level = curriculum.update_levels(
             key,
             task.level,
             done=jp.ones((), bool),
             reached_goal=success > 0,
-            progress=self._progress(task, dist),
+            progress=self._progress(task, base_xy),
             num_levels=self.tmap.num_levels,
             down_progress_frac=float(self.cfg.terrain.down_progress_frac),
         )
@@ -398,9 +375,7 @@ class AnymalToFEnv(Env):
             goal=goal,
             last_action=jp.zeros(12),
             last_qvel=jp.zeros(12),
-            last_torque=jp.zeros(12),
             params=params,
-            min_goal_dist=jp.linalg.norm(goal - spawn[:2]),
         )
         return d, task
 
@@ -410,13 +385,9 @@ class AnymalToFEnv(Env):
         q = d.qpos[7:19] + p.joint_offset_rad
         q = q + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))  # ~ N(0, std^2)
         lin_b = _quat_rotate_inv(d.qpos[3:7], d.qvel[0:3])
-        lin_n, ang_n = odometry_noise(
-            k2,
-            p.odometry_level,
-            float(self.cfg.env.odometry_lin_noise_ms),
-            float(self.cfg.env.odometry_ang_noise_rads),
-        )
-        return sensing.Measurements(q=q, lin_vel=lin_b + lin_n, ang_vel=d.qvel[3:6] + ang_n)
+        # odometry noise ~ U(+-0.1 level) m/s, U(+-0.2 level) rad/s per axis (paper's 100 % = 1)
+        lin, ang = noisy_odometry(k2, lin_b, d.qvel[3:6], p.odometry_level)
+        return sensing.Measurements(q=q, lin_vel=lin, ang_vel=ang)
 
     def _observe(self, d, task: TaskState, sense, meas: sensing.Measurements) -> dict:
         """Actor and critic observations.

@@ -69,11 +69,3 @@ def sample_episode_params(key: jax.Array, rcfg, push_interval_steps: int) -> Epi
             keys[8], (), push_interval_steps // 2, 3 * push_interval_steps // 2 + 1
         ),
     )
-
-
-def odometry_noise(key: jax.Array, level: jax.Array, lin_ms: float, ang_rads: float):
-    """Uniform per-axis velocity-estimate noise: (3,) linear [m/s] and (3,) angular [rad/s]."""
-    k1, k2 = jax.random.split(key)
-    lin = jax.random.uniform(k1, (3,), minval=-1.0, maxval=1.0) * lin_ms * level
-    ang = jax.random.uniform(k2, (3,), minval=-1.0, maxval=1.0) * ang_rads * level
-    return lin, ang

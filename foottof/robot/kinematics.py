@@ -30,11 +30,13 @@ class FootKinematics(NamedTuple):
       tof_pos: (..., 4, 3) ToF site origins [m] (= foot-sphere centres).
       tof_rot: (..., 4, 3, 3) ToF site orientation; columns are the site x, y, z axes in the base
         frame (like MuJoCo's ``site_xmat`` reshaped (3, 3)); column 2 is the optical axis.
+      knee_pos: (..., 4, 3) KFE joint anchors = knee-sphere centres [m].
     """
 
     foot_pos: jax.Array
     tof_pos: jax.Array
     tof_rot: jax.Array
+    knee_pos: jax.Array
 
 
 def leg_signs(leg: str) -> tuple[float, float]:
@@ -132,7 +134,7 @@ def forward_kinematics(
     p_shank = p_thigh + jp.einsum("...ij,...j->...i", r_thigh, t["kfe"])
     foot = p_shank + jp.einsum("...ij,...j->...i", r_shank, t["foot"])
     tof_rot = r_shank @ t["tof"]
-    return FootKinematics(foot_pos=foot, tof_pos=foot, tof_rot=tof_rot)
+    return FootKinematics(foot_pos=foot, tof_pos=foot, tof_rot=tof_rot, knee_pos=p_shank)
 
 
 def quat_to_mat(quat: jax.Array) -> jax.Array:
@@ -175,7 +177,10 @@ def world_foot_kinematics(
     fk = forward_kinematics(qpos[..., 7:19], shank_scale, tof_tilt_deg)
     foot = base_to_world(fk.foot_pos, qpos[..., 0:3], qpos[..., 3:7])
     return FootKinematics(
-        foot_pos=foot, tof_pos=foot, tof_rot=rot_base_to_world(fk.tof_rot, qpos[..., 3:7])
+        foot_pos=foot,
+        tof_pos=foot,
+        tof_rot=rot_base_to_world(fk.tof_rot, qpos[..., 3:7]),
+        knee_pos=base_to_world(fk.knee_pos, qpos[..., 0:3], qpos[..., 3:7]),
     )
 
 

@@ -3,12 +3,14 @@
   python evaluate.py --source mock_aggre [--perturbation odometry] [--levels 0,1,2,4]
                      [--episodes 1000] [--checkpoint PATH] [--out DIR] [--config configs/...]
   python evaluate.py --source all --perturbation joint_offset     # every source
-  python evaluate.py --analyze --source tof --out DIR             # one-episode analysis PNG
+  python evaluate.py --source all --perturbation all              # the whole robustness figure
+  python evaluate.py --analyze --source tof --out DIR             # one episode: PNG, MP4, .npz
   python evaluate.py --export PATH [--checkpoint PATH]            # NumPy policy (.npz)
 
 Without --checkpoint: policies/latest if present, else the newest run under runs/.
 """
 
+import io
 import os
 import sys
 
@@ -18,13 +20,15 @@ from ml_collections import config_flags
 _CONFIG = config_flags.DEFINE_config_file("config", "configs/base.py", "Config file (configs/*.py).")
 _SOURCE = flags.DEFINE_string("source", "tof", "tof | mock_ideal | mock_aggre | all.")
 _PERT = flags.DEFINE_string(
-    "perturbation", "none", "none | joint_offset | shank_length | odometry."
+    "perturbation", "none", "none | joint_offset | shank_length | odometry | all (the 3 sweeps)."
 )
 _LEVELS = flags.DEFINE_list("levels", None, "Perturbation levels (default: the c.eval sweep).")
 _EPISODES = flags.DEFINE_integer("episodes", None, "Episodes per cell (default c.eval.episodes).")
 _CHECKPOINT = flags.DEFINE_string("checkpoint", None, "Run dir, its checkpoints/ or a step dir.")
 _OUT = flags.DEFINE_string("out", None, "Output directory (default c.eval.out_dir).")
 _ANALYZE = flags.DEFINE_bool("analyze", False, "Rollout analysis of one episode instead.")
+_VIDEO = flags.DEFINE_enum("video", "mp4", ["mp4", "gif", "none"], "--analyze: rollout video.")
+_VIDEO_STRIDE = flags.DEFINE_integer("video_stride", 2, "--analyze: render every k-th step.")
 _EXPORT = flags.DEFINE_string("export", None, "Write the NumPy policy (.npz) to this path.")
 _UNTRAINED = flags.DEFINE_bool(
     "untrained", False, "Use a freshly initialized policy (pipeline checks only)."
@@ -49,13 +53,61 @@ def _checkpoint(rb) -> str | None:
     return found
 
 
+def _levels(rb, cfg, pert: str) -> dict[str, tuple[float, ...]]:
+    """{perturbation: levels} from the flags (--levels, else the c.eval sweep of each)."""
+    if pert == "all":
+        if _LEVELS.value:
+            raise ValueError("--levels cannot be given with --perturbation all (each sweep "
+                             "uses its c.eval levels)")
+        return {p: rb.check_levels(p, rb.default_levels(cfg.eval, p))
+                for p in rb.PERTURBATIONS[1:]}
+    if _LEVELS.value and pert == "none":
+        raise ValueError(f"--levels {_LEVELS.value} given with --perturbation none")
+    given = _LEVELS.value or (rb.default_levels(cfg.eval, pert) if pert in rb.PERTURBATIONS
+                              else ())
+    return {pert: rb.check_levels(pert, given)}
+
+
+def _analyze(cfg, source: str, pert: str, levels: dict, ckpt, key, out: str) -> None:
+    """One episode: analysis PNG, rollout video with the ToF rays, and the trace (.npz)."""
+    import numpy as np
+    from tqdm import tqdm
+
+    from foottof.eval import analysis, plots, video
+    from foottof.eval import robustness as rb
+
+    if pert == "all" or len(levels[pert]) != 1:
+        raise ValueError(f"--analyze runs one cell: give one perturbation and one level "
+                         f"(--levels), got {pert} {list(levels.get(pert, ()))}")
+    level = levels[pert][0]
+    env, trace = analysis.record_episode(cfg, source, ckpt, key, pert, level)
+    tag = source if pert == "none" else f"{source}_{pert}_{level:g}"
+    files = {os.path.join(out, f"analysis_{tag}.png"): plots.analysis_png(trace, trace["dt"])}
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **{k: np.asarray(v) for k, v in trace.items()})
+    files[os.path.join(out, f"episode_{tag}.npz")] = buf.getvalue()
+    frames = None
+    if _VIDEO.value != "none":  # rendered before anything is written: no GL, no files
+        rays = analysis.ray_segments(env, trace["qpos"])
+        stride = _VIDEO_STRIDE.value
+        n = -(-len(trace["qpos"]) // stride)
+        with tqdm(total=n, unit="frame", desc="render") as bar:
+            frames = video.render_rollout(env.mj_model, trace["qpos"], rays, stride, progress=bar)
+    rb.write_atomic(files)
+    written = list(files)
+    if frames is not None:
+        path = os.path.join(out, f"rollout_{tag}.{_VIDEO.value}")
+        written.append(video.write_video(path, frames, 1.0 / (trace["dt"] * _VIDEO_STRIDE.value)))
+    print(f"[evaluate] episode: {len(trace['qpos'])} steps, success={trace['success']}, "
+          f"failed={trace['failed']}; wrote {', '.join(written)}")
+
+
 def main(argv):
     del argv
     logging.set_verbosity(logging.WARNING)
     import jax
     from tqdm import tqdm
 
-    from foottof.eval import plots
     from foottof.eval import robustness as rb
 
     cfg = _CONFIG.value
@@ -63,12 +115,7 @@ def main(argv):
     try:
         sources = rb.check_source(_SOURCE.value)
         pert = _PERT.value
-        levels = rb.check_levels(
-            pert, _LEVELS.value if _LEVELS.value else rb.default_levels(cfg.eval, pert)
-            if pert in rb.PERTURBATIONS else ()
-        )
-        if _LEVELS.value and pert == "none":
-            raise ValueError(f"--levels {_LEVELS.value} given with --perturbation none")
+        levels = _levels(rb, cfg, pert)
         if _EPISODES.value is not None:
             if _EPISODES.value < 1:
                 raise ValueError(f"--episodes {_EPISODES.value}: must be >= 1")
@@ -90,23 +137,23 @@ def main(argv):
         if _ANALYZE.value:
             if len(sources) != 1:
                 raise ValueError("--analyze needs one --source, not 'all'")
-            trace = rb.analyze_episode(cfg, sources[0], ckpt, key)
-            path = os.path.join(out, f"analysis_{sources[0]}.png")
-            rb.write_atomic({path: plots.analysis_png(trace, trace["dt"])})
-            print(f"[evaluate] episode: {len(trace['foot_z'])} steps, success={trace['success']}, "
-                  f"failed={trace['failed']}; wrote {path}")
+            if _VIDEO_STRIDE.value < 1:
+                raise ValueError(f"--video_stride {_VIDEO_STRIDE.value}: must be >= 1")
+            _analyze(cfg, sources[0], pert, levels, ckpt, key, out)
             return
+        perts = rb.PERTURBATIONS[1:] if pert == "all" else (pert,)
+        cells = [(p, lv) for p in perts for lv in levels.get(p, ())]
         rows = []
-        total = len(sources) * len(levels) * int(cfg.eval.episodes)
+        total = len(sources) * len(cells) * int(cfg.eval.episodes)
         with tqdm(total=total, unit="ep", desc="evaluate") as bar:
             for source in sources:
-                for level in levels:
+                for p, level in cells:
                     key, k = jax.random.split(key)
-                    bar.set_postfix(source=source, level=level)
-                    rows.append(rb.evaluate_cell(cfg, source, pert, level, ckpt, k, bar))
+                    bar.set_postfix(source=source, perturbation=p, level=level)
+                    rows.append(rb.evaluate_cell(cfg, source, p, level, ckpt, k, bar))
         doc = rb.results_document(rows, ckpt, float(cfg.env.episode_length_s))
         paths = rb.write_results(out, _SOURCE.value, pert, doc)
-    except (ValueError, FileNotFoundError) as e:
+    except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")
     print(rb.format_table(rows))
     print("[evaluate] wrote " + ", ".join(paths.values()))

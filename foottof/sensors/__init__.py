@@ -15,9 +15,18 @@ from foottof.sensors.degradation import (
 )
 from foottof.sensors.noise_model import NoiseModel, load_model, missing_prob, noise_std
 from foottof.sensors.raycast import MISS, num_strips, ray_heightfield, ray_heightfield_normal
-from foottof.sensors.tof import ToFReading, ToFSpec, make_spec, sense, sensor_frames, site_ids
+from foottof.sensors.tof import (
+    ToFReading,
+    ToFSpec,
+    cast_rays,
+    make_spec,
+    sense,
+    sensor_frames,
+    site_ids,
+)
 
 __all__ = [
+    "cast_rays",
     "MISS",
     "DegradationBounds",
     "DegradationLevels",

@@ -292,6 +292,29 @@ def zone_minimum(spec: ToFSpec, hit_dist, hit_valid, dirs_world):
     return best, nearest
 
 
+def cast_rays(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot):
+    """Casts every sensor's rays against the heightfield up to ``max_range_m``.
+
+    The rays :func:`sense` turns into zone readings (also used to draw them in videos).
+
+    Args:
+      spec: sensor spec (static).
+      hfield: terrain.
+      site_pos: (F, 3) world position of each sensor's site [m].
+      site_rot: (F, 3, 3) site axes as columns.
+
+    Returns:
+      origins (F, 3) world sensor origins [m], dirs (F, R, 3) unit world ray directions,
+      t (F, R) hit distance [m] (-1 = no hit within range), normals (F, R, 3) at the hits.
+    """
+    pos, rot = sensor_frames(spec, site_pos, site_rot)
+    dirs = jp.einsum("fij,rj->fri", rot, jp.asarray(spec.ray_directions(), rot.dtype))  # (F,R,3)
+    f, r = spec.num_sensors, spec.num_rays
+    origins = jp.broadcast_to(pos[:, None, :], (f, r, 3)).reshape(-1, 3)
+    t, n = ray_heightfield_normal(hfield, origins, dirs.reshape(-1, 3), spec.max_range_m)
+    return pos, dirs, t.reshape(f, r), n.reshape(f, r, 3)
+
+
 def sense(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot) -> ToFReading:
     """Noise-free VL53L5CX frame of every sensor of one robot.
 
@@ -310,12 +333,7 @@ def sense(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot) -> ToFReading:
     Returns:
       ToFReading with (F, Z) arrays.
     """
-    pos, rot = sensor_frames(spec, site_pos, site_rot)
-    dirs = jp.einsum("fij,rj->fri", rot, jp.asarray(spec.ray_directions(), rot.dtype))  # (F,R,3)
-    f, r = spec.num_sensors, spec.num_rays
-    origins = jp.broadcast_to(pos[:, None, :], (f, r, 3)).reshape(-1, 3)
-    t, n = ray_heightfield_normal(hfield, origins, dirs.reshape(-1, 3), spec.max_range_m)
-    t, n = t.reshape(f, r), n.reshape(f, r, 3)
+    _, dirs, t, n = cast_rays(spec, hfield, site_pos, site_rot)
     hit = t >= 0.0
     dist, nearest = zone_minimum(spec, t, hit, dirs)
     zr = jp.asarray(spec.zone_rays())

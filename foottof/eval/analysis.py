@@ -1,0 +1,113 @@
+"""One-episode rollout analysis: readings, foot heights, poses, policy I/O and the ToF rays."""
+
+from __future__ import annotations
+
+import jax
+import jax.numpy as jp
+import numpy as np
+
+from foottof.envs import make_env
+from foottof.eval import robustness as rb
+from foottof.robot import kinematics
+from foottof.sensors import tof
+
+
+def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
+                   perturbation: str = "none", level: float = 0.0):
+    """Runs one evaluation episode (deterministic policy) and records it.
+
+    The env is the robustness test ensemble (``rb.eval_config`` / ``rb.eval_terrain_map``) with
+    one perturbation cell applied (default none).
+
+    Args:
+      cfg: full config.
+      source: foot-reading source, one of foottof.envs.SOURCES.
+      checkpoint: checkpoint path, or None for a freshly initialized policy.
+      key: PRNG key (terrain map, policy init, episode).
+      perturbation, level: the perturbation cell (see foottof.eval.robustness).
+
+    Returns:
+      (env, trace): the env that ran it (``env.mj_model`` renders it) and a dict of NumPy arrays
+      over the T control steps of the first episode (the step whose ``done`` starts the next
+      episode is cut, since its state already shows the reset pose). Step k:
+        ``policy_obs`` (T, O) actor observation the policy was given, ``actions`` (T, 12) its
+        action; after the step: ``tof`` (T, F, Z) actor readings [m], ``valid`` (T, F, Z) bool,
+        ``foot_z`` (T, 4) foot-centre heights [m], ``qpos`` (T, 19) physics state;
+      plus ``success`` / ``failed`` (bool, the episode's outcome if it ended within T steps),
+      ``dt`` [s] and ``source``.
+    """
+    c, shank = rb.eval_config(cfg, perturbation, level)
+    key_map, key_init, key_run = jax.random.split(key, 3)
+    env = make_env(c, source=source, terrain_map=rb.eval_terrain_map(c, key_map), shank_scale=shank)
+    reset, step = jax.jit(jax.vmap(env.reset)), jax.vmap(env.step)
+    state = reset(key_init[None])
+    networks, params, normalizer = rb.load_policy(c, env, state.obs, checkpoint, key_init)
+    act = networks.policy_fn(params, normalizer, deterministic=True)
+    nf, nz = env.sensing.num_sensors, env.sensing.num_zones
+
+    @jax.jit
+    def run(state, key):
+        def body(carry, k):
+            state, lstm, first = carry
+            obs_in = state.obs["state"][0]
+            lstm, action = act(lstm, state.obs, first, k)
+            state = step(state, action)
+            qpos = state.pipeline_state.qpos[0]
+            fz = kinematics.world_foot_kinematics(qpos, shank).foot_pos[:, 2]
+            o = state.obs["state"][0]  # actor obs: readings (F x Z), then validity (F x Z), ...
+            out = (obs_in, action[0], o[: nf * nz], o[nf * nz : 2 * nf * nz], fz, qpos,
+                   state.done[0], state.metrics["episode/success"][0],
+                   state.metrics["episode/failed"][0])
+            return (state, lstm, jp.zeros((1,), bool)), out
+
+        init = (state, networks.init_carry(1), jp.ones((1,), bool))
+        _, outs = jax.lax.scan(body, init, jax.random.split(key, env.episode_steps))
+        return outs
+
+    obs_in, actions, rd, valid, fz, qpos, done, succ, fail = jax.device_get(run(state, key_run))
+    ended = bool((done > 0.5).any())
+    first = int(np.argmax(done > 0.5)) if ended else len(done)
+    end = max(first, 1)
+    last = min(first, len(done) - 1)
+    return env, {
+        "policy_obs": np.asarray(obs_in[:end]),
+        "actions": np.asarray(actions[:end]),
+        "tof": np.asarray(rd[:end]).reshape(end, nf, nz),
+        "valid": np.asarray(valid[:end]).reshape(end, nf, nz) > 0.5,
+        "foot_z": np.asarray(fz[:end]),
+        "qpos": np.asarray(qpos[:end]),
+        "success": bool(succ[last] > 0.5),
+        "failed": bool(fail[last] > 0.5),
+        "dt": float(env.dt),
+        "source": source,
+    }
+
+
+def ray_segments(env, qpos) -> dict:
+    """The foot sensors' rays at recorded physics poses (what ``tof`` casts; for drawing).
+
+    Rays start at the true sensor poses of the physics model (``env.shank_scale``) and are cast
+    on the true terrain, whatever the env's source (the mocks cast into a map instead).
+
+    Args:
+      env: the AnymalToFEnv that produced ``qpos``.
+      qpos: (T, 19) physics states.
+
+    Returns:
+      dict of NumPy arrays: ``origins`` (T, F, 3) sensor origins [m], ``ends`` (T, F, R, 3) hit
+      points, or the point at ``max_range_m`` for rays without a hit [m], ``hit`` (T, F, R) bool.
+    """
+    sensing = env.sensing
+    spec, hfield, feet = sensing.spec, sensing.hfield, np.asarray(sensing.feet, np.int32)
+
+    @jax.jit
+    @jax.vmap
+    def one(q):
+        fk = kinematics.world_foot_kinematics(q, env.shank_scale)
+        origins, dirs, t, _ = tof.cast_rays(spec, hfield, fk.tof_pos[feet], fk.tof_rot[feet])
+        hit = t >= 0.0
+        length = jp.where(hit, t, spec.max_range_m)
+        return origins, origins[:, None, :] + length[..., None] * dirs, hit
+
+    origins, ends, hit = jax.device_get(one(jp.asarray(qpos, jp.float32)))
+    return {"origins": np.asarray(origins), "ends": np.asarray(ends), "hit": np.asarray(hit)}

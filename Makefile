@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow lint bench terrain-png clean
+.PHONY: demo test test-slow lint bench terrain-png render-deps clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -17,7 +17,7 @@ demo: $(STAMP)
 	$(PY) train.py --config configs/cpu.py
 
 # Fast suite (what CI runs): everything not marked slow, plus lint.
-test: $(STAMP)
+test: $(STAMP) render-deps
 	$(VENV)/bin/ruff check .
 	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 -q
 
@@ -30,6 +30,10 @@ lint: $(STAMP)
 
 bench: $(STAMP)
 	$(PY) bench/bench_env.py
+
+# Headless OpenGL (Mesa EGL or OSMesa) for rollout videos; a no-op where present.
+render-deps:
+	bash .ci/render-deps.sh
 
 terrain-png: $(STAMP)
 	$(PY) -m foottof.terrain.preview --out docs/terrains.png

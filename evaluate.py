@@ -10,7 +10,6 @@
 Without --checkpoint: policies/latest if present, else the newest run under runs/.
 """
 
-import io
 import os
 import sys
 
@@ -68,36 +67,29 @@ def _levels(rb, cfg, pert: str) -> dict[str, tuple[float, ...]]:
     return {pert: rb.check_levels(pert, given)}
 
 
-def _analyze(cfg, source: str, pert: str, levels: dict, ckpt, key, out: str) -> None:
-    """One episode: analysis PNG, rollout video with the ToF rays, and the trace (.npz)."""
-    import numpy as np
-    from tqdm import tqdm
-
-    from foottof.eval import analysis, plots, video
-    from foottof.eval import robustness as rb
-
+def _check_analyze(sources, pert: str, levels: dict) -> None:
+    if len(sources) != 1:
+        raise ValueError("--analyze needs one --source, not 'all'")
     if pert == "all" or len(levels[pert]) != 1:
         raise ValueError(f"--analyze runs one cell: give one perturbation and one level "
-                         f"(--levels), got {pert} {list(levels.get(pert, ()))}")
+                         f"(--levels), got {pert} with levels {list(levels.get(pert, ()))}")
+    if _VIDEO_STRIDE.value < 1:
+        raise ValueError(f"--video_stride {_VIDEO_STRIDE.value}: must be >= 1")
+
+
+def _analyze(cfg, source: str, pert: str, levels: dict, ckpt, key, out: str) -> None:
+    """One episode: analysis PNG, trace (.npz) and rollout video with the ToF rays."""
+    from tqdm import tqdm
+
+    from foottof.eval import analysis
+
     level = levels[pert][0]
     env, trace = analysis.record_episode(cfg, source, ckpt, key, pert, level)
     tag = source if pert == "none" else f"{source}_{pert}_{level:g}"
-    files = {os.path.join(out, f"analysis_{tag}.png"): plots.analysis_png(trace, trace["dt"])}
-    buf = io.BytesIO()
-    np.savez_compressed(buf, **{k: np.asarray(v) for k, v in trace.items()})
-    files[os.path.join(out, f"episode_{tag}.npz")] = buf.getvalue()
-    frames = None
-    if _VIDEO.value != "none":  # rendered before anything is written: no GL, no files
-        rays = analysis.ray_segments(env, trace["qpos"])
-        stride = _VIDEO_STRIDE.value
-        n = -(-len(trace["qpos"]) // stride)
-        with tqdm(total=n, unit="frame", desc="render") as bar:
-            frames = video.render_rollout(env.mj_model, trace["qpos"], rays, stride, progress=bar)
-    rb.write_atomic(files)
-    written = list(files)
-    if frames is not None:
-        path = os.path.join(out, f"rollout_{tag}.{_VIDEO.value}")
-        written.append(video.write_video(path, frames, 1.0 / (trace["dt"] * _VIDEO_STRIDE.value)))
+    written = analysis.write_analysis(
+        env, trace, out, tag, _VIDEO.value, _VIDEO_STRIDE.value,
+        progress=lambda n: tqdm(total=n, unit="frame", desc="render"),
+    )
     print(f"[evaluate] episode: {len(trace['qpos'])} steps, success={trace['success']}, "
           f"failed={trace['failed']}; wrote {', '.join(written)}")
 
@@ -120,6 +112,8 @@ def main(argv):
             if _EPISODES.value < 1:
                 raise ValueError(f"--episodes {_EPISODES.value}: must be >= 1")
             cfg.eval.episodes = _EPISODES.value
+        if _ANALYZE.value:  # flags checked before any policy is looked for or env built
+            _check_analyze(sources, pert, levels)
         ckpt = _checkpoint(rb)
         cfg = rb.with_run_network(cfg, ckpt)
         print(f"[evaluate] policy: {ckpt or 'untrained (fresh init)'}")
@@ -135,10 +129,6 @@ def main(argv):
             print(f"[evaluate] wrote {export_policy(_EXPORT.value, nets, params, norm)}")
             return
         if _ANALYZE.value:
-            if len(sources) != 1:
-                raise ValueError("--analyze needs one --source, not 'all'")
-            if _VIDEO_STRIDE.value < 1:
-                raise ValueError(f"--video_stride {_VIDEO_STRIDE.value}: must be >= 1")
             _analyze(cfg, sources[0], pert, levels, ckpt, key, out)
             return
         perts = rb.PERTURBATIONS[1:] if pert == "all" else (pert,)

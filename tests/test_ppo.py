@@ -1,7 +1,6 @@
 """Tests of the LSTM PPO trainer: GAE, memory task, Brax env, checkpoints, resume, export."""
 
 import os
-import time
 
 import jax
 import jax.numpy as jp
@@ -179,8 +178,10 @@ def test_export_numpy_policy_matches_jax(lstm_memory_run, tmp_path):
     assert np.abs(np.array(jax_actions)).max() > 0.5  # trained actions, not ~0
 
 
-def test_numpy_policy_is_fast_at_default_size(tmp_path):
-    cfg = _ppo.get_network_section()  # default sizes: LSTM 256, MLP 512-256-128
+def test_numpy_policy_at_default_size(tmp_path):
+    """Default sizes (LSTM 256, MLP 512-256-128) export and run; its 50 Hz budget is measured by
+    bench/bench_export.py, not here."""
+    cfg = _ppo.get_network_section()
     networks = net.make_networks(12, cfg)
     obs = jp.zeros((1, 48))
     params = jax.jit(networks.init_params)(jax.random.PRNGKey(0), obs)
@@ -189,13 +190,9 @@ def test_numpy_policy_is_fast_at_default_size(tmp_path):
         export.export_policy(str(tmp_path / "p.npz"), networks, params, normalizer)
     )
     x = np.random.default_rng(0).normal(size=48).astype(np.float32)
-    policy(x)
-    t0 = time.perf_counter()
-    for _ in range(200):
-        a = policy(x)
-    per_call_s = (time.perf_counter() - t0) / 200
-    assert a.shape == (12,) and a.dtype == np.float32
-    assert per_call_s < 0.005, per_call_s  # 50 Hz needs < 20 ms
+    a = policy(x)
+    assert a.shape == (12,) and a.dtype == np.float32 and np.all(np.isfinite(a))
+    assert [len(c[0]) for c in policy.carry] == [cfg.lstm_hidden_size] * cfg.lstm_num_layers
     with pytest.raises(ValueError, match=r"obs shape \(47,\)"):
         policy(x[:47])
 

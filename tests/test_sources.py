@@ -378,6 +378,55 @@ def test_joint_offset_moves_mock_readings_only():
     assert np.mean(diff) > 0.02 and np.mean(diff > 0.01) > 0.5
 
 
+def test_shank_scale_changes_physics_not_the_kinematic_model():
+    """The shank_length perturbation (x1.2) scales the *physics* model: MuJoCo C puts its feet and
+    ToF sites 20 % further along the shank, so the env's tof readings (true sensor poses) change;
+    the mock sources keep the nominal kinematics (the robot does not know), so their readings at
+    the same measured joints are unchanged."""
+    from types import SimpleNamespace
+
+    from configs import smoke
+    from foottof.envs.sensing import Measurements, Sensing
+    from foottof.robot import make_model
+
+    hf = _ridge_hf(2)
+    pos, quat, q = _poses(hf, 8, 3, aligned=True)
+    pos = pos.at[:, 2].add(0.15)  # keep the longer legs' sensors above the terrain too
+    # MuJoCo C: the scaled model's ToF sites sit 20 % further from the knee (KFE) than nominal.
+    ext = []
+    for scale in (1.0, 1.2):
+        m = make_model(None, shank_scale=scale)
+        d = mujoco.MjData(m)
+        d.qpos[:] = np.concatenate([np.asarray(pos[0], float), np.asarray(quat[0], float),
+                                    np.asarray(q[0], float)])
+        mujoco.mj_kinematics(m, d)
+        sites = [m.site(n).id for n in constants.TOF_SITES]
+        knees = [m.body(f"{leg}_shank").id for leg in constants.FEET]
+        ext.append(np.linalg.norm(d.site_xpos[sites] - d.xpos[knees], axis=-1))
+    np.testing.assert_allclose(ext[1], 1.2 * ext[0], rtol=1e-6)
+
+    cfg = smoke.get_config()
+    nominal, scaled = (Sensing(cfg, "mock_ideal", hf, s) for s in (1.0, 1.2))
+
+    @jax.jit
+    def readings(p, qu, qq):
+        d = SimpleNamespace(qpos=jp.concatenate([p, qu, qq]))
+        meas = Measurements(q=qq, lin_vel=jp.zeros(3), ang_vel=jp.zeros(3))
+        out = []
+        for s in (nominal, scaled):
+            true = s.true_reading(d)
+            out.append((true, s._source_reading(d, meas, None, true)))
+        return out
+
+    (tof_a, mock_a), (tof_b, mock_b) = jax.vmap(readings)(pos, quat, q)
+    np.testing.assert_array_equal(mock_a.distance_m, mock_b.distance_m)
+    np.testing.assert_array_equal(mock_a.valid, mock_b.valid)
+    both = np.asarray(tof_a.valid & tof_b.valid)
+    assert both.mean() > 0.5
+    diff = np.abs(np.asarray(tof_a.distance_m) - np.asarray(tof_b.distance_m))[both]
+    assert np.median(diff) > 0.03  # the sensors moved ~7 cm along the shank
+
+
 def test_mock_aggre_equals_mock_ideal_when_all_cells_in_view(stones_hf):
     """0 % odometry noise (here even a wrong estimate) and every cell in view: the map is the
     ideal scan, so the readings are mock_ideal's."""

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import io
+import os
+
 import jax
 import jax.numpy as jp
 import numpy as np
@@ -111,3 +114,53 @@ def ray_segments(env, qpos) -> dict:
 
     origins, ends, hit = jax.device_get(one(jp.asarray(qpos, jp.float32)))
     return {"origins": np.asarray(origins), "ends": np.asarray(ends), "hit": np.asarray(hit)}
+
+
+def write_analysis(env, trace: dict, out_dir: str, tag: str, video_format: str = "mp4",
+                   video_stride: int = 2, progress=None) -> list[str]:
+    """Writes one recorded episode: analysis PNG, trace .npz and the rollout video.
+
+    Files (in ``out_dir``): ``analysis_<tag>.png`` (plots.analysis_png), ``episode_<tag>.npz``
+    (every array of ``trace``) and ``rollout_<tag>.<video_format>`` (every ``video_stride``-th
+    step with the ToF rays, real time). The video is rendered before anything is written, so a
+    missing OpenGL leaves no files; each file is written atomically.
+
+    Args:
+      env, trace: :func:`record_episode` output.
+      out_dir: output folder (created).
+      tag: file-name tag (e.g. the source).
+      video_format: 'mp4', 'gif' or 'none' (no video).
+      video_stride: render every k-th control step (>= 1).
+      progress: optional callable(total_frames) -> tqdm-like bar for the rendering.
+
+    Returns:
+      The paths written.
+    """
+    from foottof.eval import plots, video
+
+    if video_format not in (*video.FORMATS, "none"):
+        raise ValueError(f"video format {video_format!r}; valid: {[*video.FORMATS, 'none']}")
+    if video_stride < 1:
+        raise ValueError(f"video stride {video_stride}: must be >= 1")
+    frames = None
+    if video_format != "none":
+        qpos = trace["qpos"]
+        bar = progress(-(-len(qpos) // video_stride)) if progress else None
+        try:
+            frames = video.render_rollout(env.mj_model, qpos, ray_segments(env, qpos),
+                                          video_stride, progress=bar)
+        finally:
+            if bar is not None:
+                bar.close()
+    buf = io.BytesIO()
+    np.savez_compressed(buf, **{k: np.asarray(v) for k, v in trace.items()})
+    files = {
+        os.path.join(out_dir, f"analysis_{tag}.png"): plots.analysis_png(trace, trace["dt"]),
+        os.path.join(out_dir, f"episode_{tag}.npz"): buf.getvalue(),
+    }
+    rb.write_atomic(files)
+    written = list(files)
+    if frames is not None:
+        path = os.path.join(out_dir, f"rollout_{tag}.{video_format}")
+        written.append(video.write_video(path, frames, 1.0 / (trace["dt"] * video_stride)))
+    return written

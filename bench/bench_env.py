@@ -6,7 +6,6 @@ when a GPU is present). On a GPU, run with --envs 4096 8192.
 """
 
 import argparse
-import importlib.util
 import os
 import resource
 import sys
@@ -17,16 +16,10 @@ import jax.numpy as jp
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
+from configs import load_config  # noqa: E402
 from foottof import constants  # noqa: E402
 from foottof.envs import make_env  # noqa: E402
 from foottof.robot import control  # noqa: E402
-
-
-def _load_config(path):
-    spec = importlib.util.spec_from_file_location("bench_cfg", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.get_config()
 
 
 def _timeit(fn, state, steps):
@@ -47,7 +40,7 @@ def main():
     p.add_argument("--steps", type=int, default=20, help="timed control steps per size")
     p.add_argument("--config", default="configs/cpu.py")
     args = p.parse_args()
-    cfg = _load_config(args.config)
+    cfg = load_config(args.config)
     env = make_env(cfg)
     mx = env.mx
     kp, kd = float(cfg.env.control.kp), float(cfg.env.control.kd)

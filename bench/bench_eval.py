@@ -12,7 +12,6 @@ cell (episodes x episode steps / throughput).
 """
 
 import argparse
-import importlib.util
 import os
 import resource
 import sys
@@ -22,15 +21,9 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
 import jax  # noqa: E402
 
+from configs import load_config  # noqa: E402
 from foottof.envs import make_env  # noqa: E402
 from foottof.eval import robustness as rb  # noqa: E402
-
-
-def _load_config(path):
-    spec = importlib.util.spec_from_file_location("bench_cfg", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod.get_config()
 
 
 def _gpu_peak_mib() -> str:
@@ -51,7 +44,7 @@ def main() -> None:
     args = p.parse_args()
     for s in args.sources:
         rb.check_source(s)
-    cfg = _load_config(args.config)
+    cfg = load_config(args.config)
     key = jax.random.PRNGKey(0)
     c, _ = rb.eval_config(cfg, "none", 0.0)
     tmap = rb.eval_terrain_map(c, key)

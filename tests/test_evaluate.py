@@ -129,6 +129,10 @@ def test_write_atomic_leaves_nothing_on_error(tmp_path):
         (["--perturbation", "wind"], "unknown perturbation 'wind'"),
         (["--perturbation", "joint_offset", "--levels", "0,0.4"], "joint_offset level 0.4"),
         (["--checkpoint", "/nonexistent/run"], "'/nonexistent/run' does not exist"),
+        (["--perturbation", "all", "--levels", "0"], "--levels cannot be given with"),
+        (["--analyze", "--source", "all"], "--analyze needs one --source"),
+        (["--analyze", "--perturbation", "odometry"], "give one perturbation and one level"),
+        (["--analyze", "--video_stride", "0"], "--video_stride 0: must be >= 1"),
     ],
 )
 def test_cli_bad_input(args, message, tmp_path):
@@ -218,3 +222,29 @@ def test_checkpoint_layout_mismatch_and_roundtrip(e2e, tmp_path):
     os.makedirs(tmp_path / "runs")
     os.rename(tmp_path / "same", tmp_path / "runs" / "same")
     assert rb.find_checkpoint(str(tmp_path)) == str(tmp_path / "runs" / "same")
+
+
+@pytest.mark.slow
+def test_cli_analyze_and_export_end_to_end(tmp_path):  # two env compiles in subprocesses (~3 min)
+    env = dict(os.environ, JAX_PLATFORMS="cpu")
+    tiny = ["--config", os.path.join(REPO, "configs", "smoke.py"),
+            "--config.env.episode_length_s=0.5", "--config.eval.num_levels=2",
+            "--config.eval.num_cols=5", "--untrained", "--out", str(tmp_path)]
+    p = subprocess.run(
+        [sys.executable, os.path.join(REPO, "evaluate.py"), "--analyze", "--source", "mock_aggre",
+         "--perturbation", "odometry", "--levels", "2", "--video", "gif", "--video_stride", "5",
+         *tiny], cwd=REPO, capture_output=True, text=True, env=env, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    tag = "mock_aggre_odometry_2"
+    assert sorted(os.listdir(tmp_path)) == sorted(
+        [f"analysis_{tag}.png", f"episode_{tag}.npz", f"rollout_{tag}.gif"])
+    with np.load(tmp_path / f"episode_{tag}.npz") as f:
+        assert f["qpos"].shape[1] == 19 and str(f["source"]) == "mock_aggre"
+    out = tmp_path / "policy.npz"
+    p = subprocess.run([sys.executable, os.path.join(REPO, "evaluate.py"), "--export", str(out),
+                        *tiny], cwd=REPO, capture_output=True, text=True, env=env, timeout=900)
+    assert p.returncode == 0, p.stderr[-3000:]
+    from foottof.ppo.export import NumpyPolicy
+
+    policy = NumpyPolicy(str(out))
+    assert policy(np.zeros(policy.obs_size, np.float32)).shape == (12,)

@@ -39,7 +39,8 @@ def robustness_png(rows: list[dict]) -> bytes:
 
     Args:
       rows: result rows (keys of foottof.eval.robustness.RESULT_KEYS); 'none' rows are ignored.
-        Error bars are the 95 % Wilson intervals. A panel without rows says so.
+        Error bars are the 95 % Wilson intervals; sources are drawn 1 % of the level span apart
+        so that equal rates stay visible. A panel without rows says so.
     """
     plt, (fig, axes) = _figure(1, 3, figsize=(13, 3.8), sharey=True)
     sources = sorted({r["source"] for r in rows})
@@ -54,11 +55,15 @@ def robustness_png(rows: list[dict]) -> bytes:
             ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes,
                     color="0.4", fontsize=12)
             continue
-        for s in sources:
+        levels = sorted({r["level"] for r in sel})
+        span = (levels[-1] - levels[0]) or 1.0
+        for i, s in enumerate(sources):
             pts = sorted((r for r in sel if r["source"] == s), key=lambda r: r["level"])
             if not pts:
                 continue
-            x = np.array([r["level"] for r in pts])
+            # Sources side by side at each level (1 % of the span apart) so equal rates stay visible.
+            dodge = (i - (len(sources) - 1) / 2) * 0.01 * span
+            x = np.array([r["level"] for r in pts]) + dodge
             y = np.array([r["success_rate"] for r in pts])
             err = np.array([[r["success_rate"] - r["ci_low"] for r in pts],
                             [r["ci_high"] - r["success_rate"] for r in pts]])

@@ -136,11 +136,10 @@ def main(argv):
         rows = []
         total = len(sources) * len(cells) * int(cfg.eval.episodes)
         with tqdm(total=total, unit="ep", desc="evaluate") as bar:
-            for source in sources:
-                for p, level in cells:
-                    key, k = jax.random.split(key)
-                    bar.set_postfix(source=source, perturbation=p, level=level)
-                    rows.append(rb.evaluate_cell(cfg, source, p, level, ckpt, k, bar))
+            for source in sources:  # one key for all: every cell sees the same map and draws
+                for p in perts:
+                    bar.set_postfix(source=source, perturbation=p)
+                    rows += rb.evaluate_sweep(cfg, source, p, levels[p], ckpt, key, bar)
         doc = rb.results_document(rows, ckpt, float(cfg.env.episode_length_s))
         paths = rb.write_results(out, _SOURCE.value, pert, doc)
     except (ValueError, FileNotFoundError, RuntimeError) as e:

@@ -58,10 +58,10 @@ def main() -> None:
             nets, params, norm = rb.load_policy(c, env, obs, None, key)
             rollout = rb.make_rollout(env, nets, n, args.steps)
             t0 = time.perf_counter()
-            jax.block_until_ready(rollout(params, norm, key))
+            jax.block_until_ready(rollout(params, norm, key, 0.0))
             compile_s = time.perf_counter() - t0
             t0 = time.perf_counter()
-            jax.block_until_ready(rollout(params, norm, jax.random.PRNGKey(1)))
+            jax.block_until_ready(rollout(params, norm, jax.random.PRNGKey(1), 0.0))
             sps = n * args.steps / (time.perf_counter() - t0)
             cell_min = 1000 * env.episode_steps / sps / 60
             rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024

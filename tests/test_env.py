@@ -93,6 +93,29 @@ def _gap_xy(env):
     raise AssertionError("no gap found in the platform_gap tile")
 
 
+def test_reset_perturbed_replaces_only_the_perturbation(env, fns):
+    """Evaluation hook: the same draws as reset(), with the joint-reading offset and odometry level
+    replaced. Actor obs layout: readings (F*Z), validity (F*Z), frame age (F), joint positions
+    (12), joint velocities (12), gravity (3), linear velocity estimate (3), ..."""
+    keys = jax.random.split(jax.random.PRNGKey(3), 4)
+    base = fns[0](keys)
+    pert = jax.jit(jax.vmap(env.reset_perturbed, in_axes=(0, None, None)))(keys, 0.1, 0.0)
+    p = pert.info["task"].params
+    np.testing.assert_array_equal(p.joint_offset_rad, np.full((4, 12), 0.1, np.float32))
+    np.testing.assert_array_equal(p.odometry_level, np.zeros(4, np.float32))
+    assert float(env.cfg.env.randomization.odometry_level) > 0  # the config's level differs
+    np.testing.assert_array_equal(pert.pipeline_state.qpos, base.pipeline_state.qpos)
+    np.testing.assert_array_equal(pert.obs["privileged_state"], base.obs["privileged_state"])
+    nf, nz = env.sensing.num_sensors, env.sensing.num_zones
+    j0 = 2 * nf * nz + nf  # joint positions
+    v0 = j0 + 12 + 12 + 3  # linear velocity estimate
+    a, b = np.asarray(pert.obs["state"]), np.asarray(base.obs["state"])
+    np.testing.assert_array_equal(a[:, : 2 * nf * nz], b[:, : 2 * nf * nz])  # tof: true poses
+    np.testing.assert_allclose(a[:, j0 : j0 + 12] - b[:, j0 : j0 + 12], 0.1, atol=1e-5)
+    np.testing.assert_array_equal(a[:, v0 : v0 + 3], 0.0)  # at rest, no odometry noise: exact
+    assert np.abs(b[:, v0 : v0 + 3]).max() > 1e-3  # the config's noise is not zero
+
+
 def test_robot_dropped_into_gap_terminates(env, fns):
     reset, step = fns
     state = reset(jax.random.split(jax.random.PRNGKey(3), NUM_ENVS))

@@ -152,32 +152,34 @@ def test_cli_bad_input(args, message, tmp_path):
 def e2e(tmp_path_factory):
     cfg = tiny_cfg()
     out = str(tmp_path_factory.mktemp("eval"))
-    row = rb.evaluate_cell(cfg, "mock_ideal", "odometry", 2.0, None, jax.random.PRNGKey(0))
-    doc = rb.results_document([row], None, cfg.env.episode_length_s)
+    rows = rb.evaluate_sweep(cfg, "mock_ideal", "odometry", (0.0, 2.0), None,
+                             jax.random.PRNGKey(0))  # one compile for both levels
+    doc = rb.results_document(rows, None, cfg.env.episode_length_s)
     paths = rb.write_results(out, "mock_ideal", "odometry", doc)
-    return cfg, out, row, paths
+    return cfg, out, rows, paths
 
 
 def test_end_to_end_writes_outputs(e2e):
-    _, out, row, paths = e2e
+    _, out, rows, paths = e2e
     assert sorted(os.listdir(out)) == [
         "results_mock_ideal_odometry.csv", "results_mock_ideal_odometry.json", "robustness.png"
     ]
     with open(paths["json"]) as f:
         doc = json.load(f)
     assert tuple(doc) == rb.TOP_KEYS  # schema: exact key sets
-    assert len(doc["results"]) == 1 and tuple(doc["results"][0]) == rb.RESULT_KEYS
-    r = doc["results"][0]
-    assert r["episodes"] == 4 and 0 <= r["successes"] <= 4 and 0 <= r["falls"] <= 4
-    assert (r["source"], r["perturbation"], r["level"]) == ("mock_ideal", "odometry", 2.0)
-    assert r["ci_low"] <= r["success_rate"] <= r["ci_high"]
-    assert math.isfinite(r["mean_speed_ms"]) and r["mean_speed_ms"] >= 0
+    assert len(doc["results"]) == 2
+    for r, level in zip(doc["results"], (0.0, 2.0), strict=True):
+        assert tuple(r) == rb.RESULT_KEYS
+        assert (r["source"], r["perturbation"], r["level"]) == ("mock_ideal", "odometry", level)
+        assert r["episodes"] == 4 and 0 <= r["successes"] <= 4 and 0 <= r["falls"] <= 4
+        assert r["ci_low"] <= r["success_rate"] <= r["ci_high"]
+        assert math.isfinite(r["mean_speed_ms"]) and r["mean_speed_ms"] >= 0
     with open(paths["csv"]) as f:
-        rows = list(csv.DictReader(f))
-    assert tuple(rows[0]) == rb.RESULT_KEYS and int(rows[0]["episodes"]) == 4
+        csv_rows = list(csv.DictReader(f))
+    assert tuple(csv_rows[0]) == rb.RESULT_KEYS and [int(r["episodes"]) for r in csv_rows] == [4, 4]
     with open(paths["png"], "rb") as f:
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
-    assert "mock_ideal" in rb.format_table([row])
+    assert "mock_ideal" in rb.format_table(rows)
 
 
 def _save_checkpoint(run_dir, params, normalizer):
@@ -193,11 +195,11 @@ def _save_checkpoint(run_dir, params, normalizer):
     ck.close()
 
 
-def test_checkpoint_layout_mismatch_and_roundtrip(e2e, tmp_path):
+def test_checkpoint_layout_mismatch_and_roundtrip(tmp_path):
     from foottof.envs import make_env
     from foottof.ppo.networks import make_networks
 
-    cfg = e2e[0]
+    cfg = tiny_cfg()
     c, _ = rb.eval_config(cfg, "none", 0.0)
     env = make_env(c, source="tof", terrain_map=rb.eval_terrain_map(c, jax.random.PRNGKey(0)))
     sizes = env.observation_size  # eval_shape, no compile

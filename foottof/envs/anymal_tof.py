@@ -155,11 +155,32 @@ class AnymalToFEnv(Env):
 
     def reset(self, rng: jax.Array) -> State:
         """Starts an episode on a random tile at curriculum level drawn from the initial range."""
+        return self._reset_first(rng, None)
+
+    def reset_perturbed(self, rng: jax.Array, joint_offset_rad, odometry_level) -> State:
+        """``reset(rng)`` with this episode's evaluation perturbations given as (traced) values.
+
+        The same draws as ``reset(rng)``; only the episode parameters ``joint_offset_rad`` (a
+        static offset added to all 12 joint readings [rad]) and ``odometry_level`` (multiple of
+        the 100 % odometry noise) are replaced, so one compiled rollout serves every level of a
+        sweep. Episodes that ``step`` auto-resets draw them from the config again.
+        """
+        return self._reset_first(
+            rng,
+            {
+                "joint_offset_rad": jp.broadcast_to(
+                    jp.asarray(joint_offset_rad, jp.float32), (constants.NUM_JOINTS,)
+                ),
+                "odometry_level": jp.asarray(odometry_level, jp.float32),
+            },
+        )
+
+    def _reset_first(self, rng: jax.Array, overrides: dict | None) -> State:
         key_lvl, key_col, key_ep = jax.random.split(rng, 3)
         max_init = min(int(self.cfg.terrain.init_level_max), self.tmap.num_levels - 1)
         level = jax.random.randint(key_lvl, (), 0, max_init + 1)  # level ~ U{0..init_level_max}
         col = jax.random.randint(key_col, (), 0, self.tmap.num_cols)  # column ~ U{0..C-1}
-        return self._reset_episode(key_ep, level, col)
+        return self._reset_episode(key_ep, level, col, overrides)
 
     def step(self, state: State, action: jax.Array) -> State:
         """One 50 Hz control step (4 physics substeps), rewards, terminations, auto-reset."""
@@ -324,10 +345,13 @@ class AnymalToFEnv(Env):
         )
         return level, task.col
 
-    def _reset_episode(self, key, level, col) -> State:
-        """A fresh episode on tile (level, col), with sensing and observation."""
+    def _reset_episode(self, key, level, col, overrides: dict | None = None) -> State:
+        """A fresh episode on tile (level, col), with sensing and observation; ``overrides``
+        replaces EpisodeParams fields (evaluation perturbations)."""
         key_core, key_sense, key_meas = jax.random.split(key, 3)
         d, task = self._reset_core(key_core, level, col)
+        if overrides:
+            task = task.replace(params=task.params.replace(**overrides))
         meas = self._measure(key_meas, d, task.params)
         sensor_state, sense = self.sensing.reset(key_sense, d, meas)
         obs = self._observe(d, task, sense, meas)

@@ -6,7 +6,8 @@ outcome, auto-reset episodes after it are ignored. Success = the episode ran to 
 and ended within ``reward.success_radius_m`` (0.5 m) of the goal (``episode/success`` of the env).
 Episodes are run in batches of ``eval.num_envs`` until ``eval.episodes`` are collected.
 
-Perturbations (each level needs its own env, hence its own compile):
+Perturbations (joint_offset and odometry levels are arguments of one compiled rollout; each
+shank_length level needs its own physics model, hence its own compile):
   none          single level 0.
   joint_offset  static offset on all joint readings [rad], valid [0, 0.3].
   shank_length  shank length scale of the physics model [-], valid [0.8, 1.2].
@@ -39,6 +40,7 @@ LEVEL_RANGES = {  # valid closed range of the levels of each perturbation
     "shank_length": (0.8, 1.2),
     "odometry": (0.0, 10.0),
 }
+TRACED_PERTURBATIONS = ("joint_offset", "odometry")  # levels are rollout arguments (one compile)
 LEVEL_UNITS = {"none": "-", "joint_offset": "rad", "shank_length": "scale", "odometry": "x100%"}
 PANEL_TITLES = {
     "joint_offset": "A  joint offset [rad]",
@@ -301,15 +303,30 @@ def load_policy(cfg, env, obs, checkpoint: str | None, key: jax.Array):
     return networks, params, normalizer
 
 
-def make_rollout(env, networks, num_envs: int, steps: int):
-    """jit-ed (params, normalizer, key) -> per-step (T, B) arrays done/success/failed/speed."""
+def make_rollout(env, networks, num_envs: int, steps: int, perturbation: str = "none"):
+    """jit-ed (params, normalizer, key, level) -> per-step (T, B) arrays done/success/failed/speed.
 
-    reset = jax.vmap(env.reset)
+    ``level`` is a traced argument for the ``TRACED_PERTURBATIONS`` (the first episode of every
+    env starts with ``env.reset_perturbed``), so one compile serves a whole sweep; for 'none' and
+    'shank_length' it is ignored (the latter lives in the env's physics model).
+    """
+    if perturbation not in PERTURBATIONS:
+        raise ValueError(
+            f"unknown perturbation {perturbation!r}; valid choices: {list(PERTURBATIONS)}"
+        )
+    rcfg = env.cfg.env.randomization
     step = jax.vmap(env.step)
 
-    def rollout(params, normalizer, key):
+    def reset(keys, level):
+        if perturbation == "joint_offset":
+            return jax.vmap(lambda k: env.reset_perturbed(k, level, rcfg.odometry_level))(keys)
+        if perturbation == "odometry":
+            return jax.vmap(lambda k: env.reset_perturbed(k, rcfg.joint_offset_rad, level))(keys)
+        return jax.vmap(env.reset)(keys)
+
+    def rollout(params, normalizer, key, level):
         key_reset, key_run = jax.random.split(key)
-        state = reset(jax.random.split(key_reset, num_envs))
+        state = reset(jax.random.split(key_reset, num_envs), level)
         act = networks.policy_fn(params, normalizer, deterministic=True)
         carry = networks.init_carry(num_envs)
         first = jp.ones((num_envs,), bool)
@@ -332,6 +349,66 @@ def make_rollout(env, networks, num_envs: int, steps: int):
     return jax.jit(rollout)
 
 
+def evaluate_sweep(
+    cfg: ml_collections.ConfigDict,
+    source: str,
+    perturbation: str,
+    levels,
+    checkpoint: str | None,
+    key: jax.Array,
+    progress=None,
+) -> list[dict]:
+    """Runs eval.episodes first episodes at every level of one (source, perturbation); rows.
+
+    Every level sees the same terrain map, policy and episode draws (spawn, goal, sensor noise):
+    a paired comparison, in which only the perturbation differs. Joint-offset and odometry levels
+    share one compiled rollout; every shank-length level needs its own physics model (compile).
+
+    Args:
+      cfg: full config (c.eval gives episodes, num_envs and the ensemble).
+      source: foot-reading source.
+      perturbation, levels: validated by check_levels.
+      checkpoint: checkpoint path, or None for a freshly initialized (untrained) policy.
+      key: PRNG key (terrain map, policy init, episodes).
+      progress: optional tqdm bar, advanced by the episodes of each batch.
+
+    Returns:
+      One result row (keys RESULT_KEYS) per level, in the order of ``levels``.
+    """
+    check_source(source)
+    levels = check_levels(perturbation, levels)
+    episodes, num_envs = int(cfg.eval.episodes), int(cfg.eval.num_envs)
+    if episodes < 1 or num_envs < 1:
+        raise ValueError(f"eval.episodes={episodes}, eval.num_envs={num_envs}: both must be >= 1")
+    num_envs = min(num_envs, episodes)
+    key_map, key_init, key_run = jax.random.split(key, 3)
+    traced = perturbation in TRACED_PERTURBATIONS
+    groups = [levels] if traced or perturbation == "none" else [(lv,) for lv in levels]
+    rows = []
+    for group in groups:
+        c, shank = eval_config(cfg, "none" if traced else perturbation, group[0])
+        env = make_env(
+            c, source=source, terrain_map=eval_terrain_map(c, key_map), shank_scale=shank
+        )
+        obs = jax.jit(jax.vmap(env.reset))(jax.random.split(key_init, num_envs)).obs
+        networks, params, normalizer = load_policy(c, env, obs, checkpoint, key_init)
+        rollout = make_rollout(env, networks, num_envs, env.episode_steps, perturbation)
+        for level in group:
+            parts, collected, k_run = [], 0, key_run
+            while collected < episodes:
+                k_run, k = jax.random.split(k_run)
+                outs = jax.device_get(rollout(params, normalizer, k, jp.float32(level)))
+                res = first_episode_outcomes(*outs)
+                take = min(num_envs, episodes - collected)
+                parts.append({n: v[:take] for n, v in res.items()})
+                collected += take
+                if progress is not None:
+                    progress.update(take)
+            merged = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
+            rows.append(summarize(source, perturbation, level, merged))
+    return rows
+
+
 def evaluate_cell(
     cfg: ml_collections.ConfigDict,
     source: str,
@@ -341,37 +418,8 @@ def evaluate_cell(
     key: jax.Array,
     progress=None,
 ) -> dict:
-    """Runs eval.episodes first episodes of one (source, perturbation, level) cell; one row.
-
-    Args:
-      cfg: full config (c.eval gives episodes, num_envs and the ensemble).
-      checkpoint: checkpoint path, or None for a freshly initialized (untrained) policy.
-      key: PRNG key (terrain map, policy init, episodes).
-      progress: optional tqdm bar, advanced by the episodes of each batch.
-    """
-    c, shank = eval_config(cfg, perturbation, level)
-    episodes, num_envs = int(c.eval.episodes), int(c.eval.num_envs)
-    if episodes < 1 or num_envs < 1:
-        raise ValueError(f"eval.episodes={episodes}, eval.num_envs={num_envs}: both must be >= 1")
-    num_envs = min(num_envs, episodes)
-    key_map, key_init, key_run = jax.random.split(key, 3)
-    env = make_env(c, source=source, terrain_map=eval_terrain_map(c, key_map), shank_scale=shank)
-    obs = jax.jit(jax.vmap(env.reset))(jax.random.split(key_init, num_envs)).obs
-    networks, params, normalizer = load_policy(c, env, obs, checkpoint, key_init)
-    rollout = make_rollout(env, networks, num_envs, env.episode_steps)
-    parts = []
-    collected = 0
-    while collected < episodes:
-        key_run, k = jax.random.split(key_run)
-        outs = jax.device_get(rollout(params, normalizer, k))
-        res = first_episode_outcomes(*outs)
-        take = min(num_envs, episodes - collected)
-        parts.append({n: v[:take] for n, v in res.items()})
-        collected += take
-        if progress is not None:
-            progress.update(take)
-    merged = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
-    return summarize(source, perturbation, level, merged)
+    """One (source, perturbation, level) cell: ``evaluate_sweep`` with a single level."""
+    return evaluate_sweep(cfg, source, perturbation, (level,), checkpoint, key, progress)[0]
 
 
 # ---------------------------------------------------------------------------------------------

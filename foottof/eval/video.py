@@ -77,8 +77,12 @@ class RolloutRenderer:
         self.width, self.height = width, height
         self._ctx = _gl_context(self.m.vis.global_.offwidth, self.m.vis.global_.offheight)
         self.scene = mujoco.MjvScene(self.m, maxgeom=self.m.ngeom + 4000)
-        self._con = mujoco.MjrContext(self.m, mujoco.mjtFontScale.mjFONTSCALE_100)
-        mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
+        try:
+            self._con = mujoco.MjrContext(self.m, mujoco.mjtFontScale.mjFONTSCALE_100)
+            mujoco.mjr_setBuffer(mujoco.mjtFramebuffer.mjFB_OFFSCREEN, self._con)
+        except Exception:
+            self._ctx.free()
+            raise
         self._opt = mujoco.MjvOption()
         self._pert = mujoco.MjvPerturb()
         self.camera = mujoco.MjvCamera()
@@ -100,25 +104,25 @@ class RolloutRenderer:
     def __exit__(self, *exc):
         self.close()
 
-    def _add_segment(self, a, b, rgba) -> None:
-        mj, scn = self._mj, self.scene
+    def _next_geom(self):
+        scn = self.scene
         if scn.ngeom >= scn.maxgeom:
             raise RuntimeError(f"scene full ({scn.maxgeom} geoms): too many rays to draw")
-        g = scn.geoms[scn.ngeom]
+        scn.ngeom += 1
+        return scn.geoms[scn.ngeom - 1]
+
+    def _add_segment(self, a, b, rgba) -> None:
+        mj, g = self._mj, self._next_geom()
         mj.mjv_initGeom(g, mj.mjtGeom.mjGEOM_LINE, np.zeros(3), np.zeros(3), np.eye(3).ravel(),
                         np.asarray(rgba, np.float32))
         mj.mjv_connector(g, mj.mjtGeom.mjGEOM_LINE, 2.0, np.asarray(a, np.float64),
                          np.asarray(b, np.float64))
-        scn.ngeom += 1
 
     def _add_point(self, p, rgba) -> None:
-        mj, scn = self._mj, self.scene
-        if scn.ngeom >= scn.maxgeom:
-            raise RuntimeError(f"scene full ({scn.maxgeom} geoms): too many rays to draw")
-        mj.mjv_initGeom(scn.geoms[scn.ngeom], mj.mjtGeom.mjGEOM_SPHERE,
+        mj = self._mj
+        mj.mjv_initGeom(self._next_geom(), mj.mjtGeom.mjGEOM_SPHERE,
                         np.full(3, HIT_POINT_RADIUS_M), np.asarray(p, np.float64),
                         np.eye(3).ravel(), np.asarray(rgba, np.float32))
-        scn.ngeom += 1
 
     def render(self, qpos, origins=None, ends=None, hit=None) -> np.ndarray:
         """One frame (height, width, 3) uint8 of the state ``qpos`` (nq,).

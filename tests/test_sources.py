@@ -215,6 +215,32 @@ def test_drift_grows_with_odometry_noise(drift_runs):
     assert means[3] > 3.0 * means[0]
 
 
+def test_update_with_reset_equals_a_fresh_map(drift_runs, stones_hf):
+    """aggre_update(..., reset=True) on a drifted map (4x odometry noise) is aggre_init at the new
+    pose (the env restarts auto-reset episodes' maps this way): flags and indices exactly, heights
+    to float rounding (< 0.1 mm, two differently fused programs); reset=False is the plain
+    update."""
+    _, states, _ = drift_runs
+    drifted = jax.tree.map(lambda a: a[-1], states)
+    pos, quat, _, _ = _walk(3, 0.8, 0.3)
+    p, q = pos[2] + jp.array([0.3, -0.2, 0.0]), quat[2]
+    v, w = jp.array([0.9, 0.1, 0.0]), jp.array([0.0, 0.0, 0.4])
+    upd = jax.jit(em.aggre_update, static_argnames=("dt",))
+    fresh = jax.jit(em.aggre_init)(stones_hf, p, q)
+    got = upd(drifted, stones_hf, p, q, v, w, dt=DT, reset=jp.asarray(True))
+    for name, a, b in zip(fresh.__dataclass_fields__, jax.tree.leaves(got),
+                          jax.tree.leaves(fresh), strict=True):
+        if np.issubdtype(np.asarray(a).dtype, np.floating):  # two compiles: rounding only
+            np.testing.assert_allclose(a, b, atol=1e-4, rtol=0, err_msg=name)
+        else:
+            np.testing.assert_array_equal(a, b, err_msg=name)
+    plain = upd(drifted, stones_hf, p, q, v, w, dt=DT, reset=jp.asarray(False))
+    ref = em.aggre_update(drifted, stones_hf, p, q, v, w, DT)
+    np.testing.assert_allclose(plain.scan, ref.scan, atol=1e-4, rtol=0)
+    np.testing.assert_allclose(plain.pose_est, ref.pose_est, atol=1e-6, rtol=0)
+    assert np.abs(np.asarray(drifted.pose_est[:2])).max() > 0.1  # a real restart, not a no-op
+
+
 def test_cells_in_view_equal_ground_truth(drift_runs):
     levels, states, ideal = drift_runs
     in_view = np.asarray(states.scan_in_view)

@@ -141,12 +141,11 @@ class Sensing:
         key_step, key_reset = jax.random.split(key)
         base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
         emap = state.emap
-        if self.source == "mock_aggre":
-            moved = em.aggre_update(
-                state.emap, self.hfield, base_pos, base_quat, meas.lin_vel, meas.ang_vel, self.dt
+        if self.source == "mock_aggre":  # where done: a fresh map (= aggre_init), same pass
+            emap = em.aggre_update(
+                state.emap, self.hfield, base_pos, base_quat, meas.lin_vel, meas.ang_vel, self.dt,
+                reset=done,
             )
-            fresh = em.aggre_init(self.hfield, base_pos, base_quat)
-            emap = jax.tree.map(lambda a, b: jp.where(done, a, b), fresh, moved)
         true = self.true_reading(d)
         reading = self._source_reading(d, meas, emap, true)
         t_step, o_step = deg.step(self.spec, self.model, state.tof, reading, key_step)

@@ -166,11 +166,13 @@ def _in_view(r_xy, h_rel, tilt, cameras, see_all: bool) -> jax.Array:
     return cam_lib.visible(p_base, cameras)
 
 
-def _camera_update(state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all):
-    """Overwrite stored vertices seen by a camera with ground truth (placed via pose_est)."""
+def _camera_update(state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all,
+                   reset=False):
+    """Overwrite stored vertices seen by a camera with ground truth (placed via pose_est);
+    where ``reset`` (traced bool) every vertex counts as seen (aggre_init's full prior)."""
     r_xy = _odom_to_robot(_map_xy(state.center_idx), state.pose_est)  # where the robot thinks
     h_rel = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy)  # what the camera sees
-    seen = _in_view(r_xy, h_rel, tilt_rotation(base_quat), cameras, see_all)
+    seen = _in_view(r_xy, h_rel, tilt_rotation(base_quat), cameras, see_all) | reset
     heights = jp.where(seen, h_rel + state.pose_est[2], state.heights)
     return state.replace(heights=heights, known=state.known | seen)
 
@@ -314,8 +316,14 @@ def aggre_update(
     dt: float,
     cameras: tuple[cam_lib.Camera, ...] = cam_lib.CAMERAS,
     see_all: bool = False,
+    reset=False,
 ) -> ElevationMapState:
     """One elevation-map update: move the prior by odometry, then overwrite what the cameras see.
+
+    With ``reset`` (a traced bool, e.g. the env's ``done``) the result is exactly
+    ``aggre_init(hfield, base_pos, base_quat, cameras, see_all)`` (full prior) in the same pass:
+    the estimated pose restarts at the odometry origin and every vertex is refreshed. The env
+    uses it to restart the map of auto-reset episodes without building a second map every step.
 
     Args:
       state: map after the previous step.
@@ -337,9 +345,10 @@ def aggre_update(
     pose_est = dead_reckon(
         state.pose_est, state.tilt_prev, base_quat, lin_vel_est_base, ang_vel_est_base, dt
     )
+    pose_est = jp.where(reset, jp.zeros_like(pose_est), pose_est)  # reset: odometry origin
     state = state.replace(pose_est=pose_est, tilt_prev=tilt_rotation(base_quat))
-    state = _scroll(state)
-    state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all)
+    state = _scroll(state)  # reset: back to centre index 0
+    state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all, reset)
     return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)
 
 

@@ -96,7 +96,8 @@ def visible(points_base: jax.Array, cameras: tuple[Camera, ...] = CAMERAS) -> ja
     seen = jp.zeros(points_base.shape[:-1], dtype=bool)
     for cam in cameras:
         # Camera-frame coordinates pc = rot^T (p - pos), written out with the camera's constants
-        # (a (..., 3) @ (3, 3) product is slow on XLA's CPU backend; this is 8x faster there).
+        # (a (..., 3) @ (3, 3) product is slow on XLA's CPU backend: 322 -> 4.7 ms for 128 x 21k
+        # points on 2 cores).
         rot = camera_rotation(cam)
         rx, ry, rz = x - cam.pos_m[0], y - cam.pos_m[1], z - cam.pos_m[2]
         fwd, left, up = (

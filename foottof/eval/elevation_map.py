@@ -320,8 +320,9 @@ def aggre_update(
 ) -> ElevationMapState:
     """One elevation-map update: move the prior by odometry, then overwrite what the cameras see.
 
-    With ``reset`` (a traced bool, e.g. the env's ``done``) the result is exactly
-    ``aggre_init(hfield, base_pos, base_quat, cameras, see_all)`` (full prior) in the same pass:
+    With ``reset`` (a traced bool, e.g. the env's ``done``) the result is
+    ``aggre_init(hfield, base_pos, base_quat, cameras, see_all)`` (full prior; flags and indices
+    exactly, heights to float rounding) in the same pass:
     the estimated pose restarts at the odometry origin and every vertex is refreshed. The env
     uses it to restart the map of auto-reset episodes without building a second map every step.
 
@@ -336,6 +337,7 @@ def aggre_update(
       dt: time since the previous update [s] (> 0).
       cameras: static camera tuple.
       see_all: static; True makes every cell visible.
+      reset: () bool (traced), restart the map at the current pose (see above).
 
     Returns:
       The updated ElevationMapState.

@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo test test-slow lint bench terrain-png render-deps clean
+.PHONY: demo learn test test-slow lint bench terrain-png render-deps clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -15,6 +15,12 @@ $(STAMP): pyproject.toml
 # Main job on a CPU-sized default: a short training run (configs/cpu.py).
 demo: $(STAMP)
 	$(PY) train.py --config configs/cpu.py
+
+# Learning check from scratch on flat ground (configs/flat.py): a new run runs/flat-<time>, then its
+# learning curve (success, falls, return, length, level, speed vs env steps) as CSV + PNG.
+learn: $(STAMP)
+	$(PY) train.py --config configs/flat.py $(LEARN_ARGS)
+	$(PY) -m foottof.ppo.curves runs/flat
 
 # Fast suite (what CI runs): everything not marked slow, plus lint.
 test: $(STAMP) render-deps

@@ -9,18 +9,19 @@ def get_section() -> ml_collections.ConfigDict:
     r.guidance_max_speed_ms = 1.0  # dense guidance saturates at this speed toward the goal [m/s]
     r.stall_speed_ms = 0.1  # below this speed while far from the goal counts as stalling [m/s]
     r.stall_grace_s = 2.0  # no stall penalty during the first seconds of an episode [s]
-    r.jump_height_m = 0.25  # base higher than this above the nominal stance height counts as a jump [m]
+    r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
     s = ml_collections.ConfigDict()
     s.reach = 10.0  # sparse: +1 at the last step if within success_radius_m of the goal
-    s.guidance = 1.0  # dense: base velocity toward the goal, clipped at guidance_max_speed_ms [per s]
-    s.termination = -5.0  # sparse: -1 on a failure termination (fall, body contact, flip)
+    s.guidance = 5.0  # dense: base velocity toward the goal, clipped at guidance_max_speed_ms [per s]
+    s.termination = -1.0  # sparse: 1 on a failure termination (fall, base contact, flip, divergence)
     s.torques = -1e-5  # sum of squared joint torques [(N m)^2]
     s.joint_acc = -2.5e-7  # sum of squared joint accelerations [(rad/s^2)^2]
     s.action_rate = -0.01  # sum of squared action differences between control steps
     s.foot_slip = -0.05  # sum over feet in contact of squared horizontal foot speed [(m/s)^2]
     s.orientation = -1.0  # squared norm of the horizontal part of projected gravity
     s.stall = -0.5  # 1 while stalling (slow and not within success radius) after the grace period
-    s.jump = -1.0  # 1 while the base is higher than jump_height_m above the stance height
+    s.jump = -1.0  # 1 while all four feet are off the ground (no foot within the contact margin)
     s.posture = -0.5  # after reaching the goal: sum of squared deviations from the default pose [rad^2]
+    s.collision = -1.0  # number of knee spheres touching the terrain (not a termination) [per s]
     r.scales = s
     return r

@@ -15,6 +15,7 @@ def get_section() -> ml_collections.ConfigDict:
     c.pit_z_m = -1.0  # pit floor under stones and beams = Heightfield floor z_floor_m [m]
     c.z_range_m = 2.0  # heightfield elevation range: heights live in [pit_z_m, pit_z_m + this] [m]
     c.border_m = 1.0  # flat z = 0 border around the whole map [m]
+    c.flat = False  # every tile flat at z = 0 (learning checks: configs/flat.py) [-]
     # Map layout: rows = difficulty levels (along +y), columns = terrain types (along +x).
     c.num_levels = 10  # curriculum levels = tile rows of the map
     c.num_cols = 20  # tile columns of the map, split among types by the stage weights
@@ -62,4 +63,5 @@ def get_section() -> ml_collections.ConfigDict:
     # Curriculum (foottof/terrain/curriculum.py).
     c.init_level_max = 2  # initial level ~ U{0..init_level_max} [level]
     c.down_progress_frac = 0.5  # move down when covered < this fraction of the goal distance [-]
+    c.up_progress_frac = 0.8  # move up when covered >= this fraction (or reached the goal) [-]
     return c

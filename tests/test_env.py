@@ -146,7 +146,8 @@ def test_sparse_reward_at_timeout(env, fns, offset_m, expect):
     level0 = int(task.level[0])
     state = _with(state, 0, goal=goal, step=env.episode_steps - 1)
     state = step(state, jp.zeros((NUM_ENVS, 12)))
-    assert float(state.info["truncation"][0]) == 1.0
+    # The deadline is terminal (env.bootstrap_time_limit = False): nothing is bootstrapped there.
+    assert float(state.info["truncation"][0]) == 0.0
     assert float(state.done[0]) == 1.0
     reach = float(state.metrics["reward/reach"][0])
     success = float(state.metrics["episode/success"][0])
@@ -219,6 +220,7 @@ def _inputs(**kw):
         time_s=jp.asarray(5.0),
         failed=jp.asarray(0.0),
         truncated=jp.asarray(0.0),
+        knee_contact=jp.zeros(4),
     )
     base.update(kw)
     return rw.RewardInputs(**base)
@@ -264,6 +266,8 @@ def test_reward_terms_hand_checked():
     assert _terms(goal_xy=jp.array([0.4, 0.0]))["reach"] == 0.0
     # Termination.
     assert _terms(failed=jp.asarray(1.0))["termination"] == 1.0
+    # Collision: number of knees touching the terrain.
+    assert _terms(knee_contact=jp.array([1.0, 0.0, 1.0, 0.0]))["collision"] == 2.0
     # Scaling: dense terms get the control dt, sparse ones not.
     scaled = rw.scaled_terms({k: jp.asarray(1.0) for k in rw.REWARD_TERMS}, rcfg.scales, 0.02)
     assert float(scaled["reach"]) == pytest.approx(rcfg.scales.reach)
@@ -285,3 +289,93 @@ def test_bad_inputs():
 
     with pytest.raises(ValueError, match="lava"):
         generate_tile("lava", jax.random.PRNGKey(0), 0.5)
+
+
+def test_total_reward_clips_dense_and_drops_diverged_steps():
+    names = rw.REWARD_TERMS
+    terms = {k: jp.asarray(0.0) for k in names}
+    terms.update(guidance=jp.asarray(0.1), foot_slip=jp.asarray(-80.0), reach=jp.asarray(10.0))
+    terms.update(termination=jp.asarray(-1.0))
+    # Hand-summed: dense 0.1 - 80 = -79.9; sparse 10 - 1 = 9.
+    f = lambda pos, valid: float(rw.total_reward(terms, pos, jp.asarray(valid)))
+    assert f(False, 1.0) == pytest.approx(-70.9)
+    assert f(True, 1.0) == pytest.approx(9.0)  # dense clipped at 0, sparse added after the clip
+    assert f(False, 0.0) == pytest.approx(9.0)  # diverged step: dense terms dropped
+    terms.update(foot_slip=jp.asarray(0.0))
+    assert f(True, 1.0) == pytest.approx(9.1)
+
+
+def test_deadline_value_target_stays_bounded(env, fns):
+    """The at-goal state at the deadline: repeatedly fitting V to its own target (what PPO's value
+    regression does) converges to the reach reward, not to reach / (1 - gamma)."""
+    from foottof.ppo import losses
+
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(4), NUM_ENVS))
+    goal = state.pipeline_state.qpos[0, 0:2]
+    state = step(_with(state, 0, goal=goal, step=env.episode_steps - 1), jp.zeros((NUM_ENVS, 12)))
+    reward = jp.asarray(state.reward[0]).reshape(1, 1)
+    trunc = jp.asarray(state.info["truncation"][0]).reshape(1, 1)
+    done = jp.asarray(state.done[0]).reshape(1, 1)
+    assert float(done[0, 0]) == 1.0 and float(state.metrics["reward/reach"][0]) > 0
+    gamma = float(_cfg().ppo.gamma)
+    v = jp.zeros((1, 1))
+    for _ in range(2000):
+        r = losses.bootstrap_truncation(reward, v, trunc, gamma)
+        _, target = losses.compute_gae(r, v, done, jp.zeros(1), gamma, 0.95)
+        v = target
+    assert float(v[0, 0]) == pytest.approx(float(reward[0, 0]), rel=1e-5)
+    assert float(v[0, 0]) < 2 * float(_cfg().reward.scales.reach)
+
+
+def test_diverged_step_pays_termination_only(env, fns):
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(8), NUM_ENVS))
+    qvel = state.pipeline_state.qvel.at[0, 6:18].set(1e4)  # absurd joint speeds: diverged
+    state = state.replace(pipeline_state=state.pipeline_state.replace(qvel=qvel))
+    state = step(state, jp.zeros((NUM_ENVS, 12)))
+    assert float(state.done[0]) == 1.0 and float(state.metrics["episode/failed"][0]) == 1.0
+    assert float(state.reward[0]) == pytest.approx(float(_cfg().reward.scales.termination))
+
+
+def _kneeling(env, base_xy, knee_depth_m):
+    """qpos in the default pose, level, with the lowest knee sphere ``knee_depth_m`` into z = 0."""
+    from foottof.robot import kinematics
+    from foottof.robot.model import KNEE_SPHERE_RADIUS_M
+
+    q = jp.concatenate([jp.array([0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0]), env._default_q])
+    knee_z = float(jp.min(kinematics.world_foot_kinematics(q, env.shank_scale).knee_pos[:, 2]))
+    z = -knee_z + KNEE_SPHERE_RADIUS_M - knee_depth_m
+    return q.at[0:3].set(jp.array([base_xy[0], base_xy[1], z]))
+
+
+@pytest.mark.parametrize("terminates", [False, True])
+def test_knee_contact_is_a_penalty_unless_configured(env, terminates):
+    """Knees on flat ground, base clear: a collision penalty, a failure only on request."""
+    import types
+
+    from foottof.robot import kinematics
+
+    state = jax.jit(env.reset)(jax.random.PRNGKey(2))
+    xy = state.info["task"].spawn[0:2]  # start platform: flat at z = 0
+    cfg = _cfg()
+    cfg.env.knee_contact_terminates = terminates
+    e = make_env(cfg) if terminates else env
+    for depth, touching in ((0.01, True), (-0.01, False)):
+        qpos = _kneeling(e, xy, depth)
+        fk = kinematics.world_foot_kinematics(qpos, e.shank_scale)
+        gravity = jp.array([0.0, 0.0, -1.0])
+        failed, knees = e._failed(types.SimpleNamespace(qpos=qpos), gravity, fk)
+        assert (float(jp.sum(knees)) > 0) == touching
+        assert bool(failed) == (touching and terminates)
+
+
+def test_spawn_pays_no_penalty_events(env, fns):
+    """Standing still from the spawn: no jump, collision, termination or slip events."""
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(9), NUM_ENVS))
+    state = _on_columns(env, state)
+    for _ in range(25):
+        state = step(state, jp.zeros((NUM_ENVS, 12)))
+        for term in ("jump", "collision", "termination"):
+            assert np.all(np.asarray(state.metrics[f"reward/{term}"]) == 0.0), term

@@ -531,6 +531,12 @@ def test_update_levels_rules():
     assert int(update_levels(key, 2, True, False, 0.7, num_levels)) == 2
     assert int(update_levels(key, 2, True, False, 0.2, num_levels)) == 1
     assert int(update_levels(key, 2, False, True, 1.0, num_levels)) == 2
+    # Promotion on distance: covered >= up_progress_frac without reaching the goal -> up.
+    assert int(update_levels(key, 2, True, False, 0.85, num_levels, 0.5, 0.8)) == 3
+    assert int(update_levels(key, 2, True, False, 0.75, num_levels, 0.5, 0.8)) == 2
+    assert int(update_levels(key, 2, True, False, 0.85, num_levels)) == 2  # default: goal only
+    with pytest.raises(ValueError, match="up_progress_frac=0.3"):
+        update_levels(key, 2, True, False, 0.85, num_levels, 0.5, 0.3)
 
 
 def test_update_levels_top_level_goes_random():

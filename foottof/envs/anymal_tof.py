@@ -41,6 +41,7 @@ EPISODE_METRICS = (
     "curriculum/level",
     "episode/speed_ms",
 )
+STEP_METRICS = ("task/speed_ms",)  # averaged over all steps by the trainer
 
 
 @struct.dataclass
@@ -83,7 +84,8 @@ class AnymalToFEnv(Env):
     ``reset(key) -> State`` and ``step(state, action) -> State``; the step auto-resets finished
     episodes inside the compiled step (the returned state holds the new episode's observation with
     ``done = 1`` and the finished episode's reward). ``State.info['truncation']`` is 1 at the time
-    limit (bootstrap), ``State.obs`` is ``{'state': actor obs, 'privileged_state': critic obs}``.
+    limit only if ``env.bootstrap_time_limit`` (by default the deadline is terminal),
+    ``State.obs`` is ``{'state': actor obs, 'privileged_state': critic obs}``.
 
     Args:
       cfg: the full config (configs/base.py layout).
@@ -222,7 +224,8 @@ class AnymalToFEnv(Env):
         contact = (foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m))
         contact = contact.astype(jp.float32)
         gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
-        failed = self._failed(d, gravity, fk) | diverged
+        failed, knee_contact = self._failed(d, gravity, fk)
+        failed = failed | diverged
         truncated = (step >= self.episode_steps) & ~failed
         done = failed | truncated
         dist = jp.linalg.norm(task.goal - base_pos[:2])
@@ -244,13 +247,15 @@ class AnymalToFEnv(Env):
             time_s=step.astype(jp.float32) * self.dt,
             failed=failed.astype(jp.float32),
             truncated=truncated.astype(jp.float32),
+            knee_contact=knee_contact,
         )
         terms = rw.scaled_terms(
             rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
         )
         clip = float(self.cfg.env.clip_reward)
         terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
-        reward = sum(terms.values())
+        valid = 1.0 - diverged.astype(jp.float32)
+        reward = rw.total_reward(terms, bool(self.cfg.reward.only_positive), valid)
         success = (truncated & (dist < float(self.cfg.reward.success_radius_m))).astype(jp.float32)
 
         # Continue or auto-reset (curriculum update on the finished episode).
@@ -279,10 +284,14 @@ class AnymalToFEnv(Env):
                 "episode/progress": self._progress(task, base_pos[:2]),
                 "curriculum/level": task.level.astype(jp.float32),
                 "episode/speed_ms": jp.linalg.norm(qvel[0:2]),
+                "task/speed_ms": jp.linalg.norm(qvel[0:2]),
             }
         )
         info = dict(state.info)
-        info.update(task=next_task, sensor=sensor_state, truncation=truncated.astype(jp.float32))
+        # The deadline is part of this task (time left is observed, reach pays at the last step):
+        # bootstrapping V there would pay the at-goal value again forever (10 / (1 - gamma)).
+        bootstrap = truncated & bool(self.cfg.env.bootstrap_time_limit)
+        info.update(task=next_task, sensor=sensor_state, truncation=bootstrap.astype(jp.float32))
         return State(
             pipeline_state=next_d,
             obs=obs,
@@ -312,8 +321,9 @@ class AnymalToFEnv(Env):
         lever = fk.foot_pos - qpos[0:3]
         return fk, qvel[0:3] + jp.cross(omega_w, lever) + dfk.foot_pos
 
-    def _failed(self, d, gravity, fk: kinematics.FootKinematics) -> jax.Array:
-        """Base or knee touches the terrain, robot falls into a gap, or bad orientation."""
+    def _failed(self, d, gravity, fk: kinematics.FootKinematics) -> tuple[jax.Array, jax.Array]:
+        """Failure (base touches the terrain, falls into a gap, bad orientation; knee contact too
+        if ``env.knee_contact_terminates``) and (4,) knee contacts (1.0 where a knee touches)."""
         ecfg = self.cfg.env
         base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
         centres = kinematics.base_to_world(
@@ -322,13 +332,14 @@ class AnymalToFEnv(Env):
         base_clear = centres[:, 2] - self.hfield.height_at(centres[:, :2]) - BASE_SPHERE_RADIUS_M
         knees = fk.knee_pos
         knee_clear = knees[:, 2] - self.hfield.height_at(knees[:, :2]) - KNEE_SPHERE_RADIUS_M
-        body_contact = (jp.min(base_clear) < float(ecfg.body_contact_margin_m)) | (
-            jp.min(knee_clear) < float(ecfg.body_contact_margin_m)
-        )
+        knee_contact = knee_clear < float(ecfg.body_contact_margin_m)
+        body_contact = jp.min(base_clear) < float(ecfg.body_contact_margin_m)
+        if bool(ecfg.knee_contact_terminates):
+            body_contact = body_contact | jp.any(knee_contact)
         fell = base_pos[2] < self.hfield.z_floor_m + float(ecfg.fall_height_above_floor_m)
         fell = fell | (jp.min(fk.foot_pos[:, 2]) < float(ecfg.foot_fall_z_m))
         flipped = gravity[2] > -math.cos(math.radians(float(ecfg.max_tilt_deg)))
-        return body_contact | fell | flipped
+        return body_contact | fell | flipped, knee_contact.astype(jp.float32)
 
     def _progress(self, task: TaskState, base_xy) -> jax.Array:
         return curriculum.progress_fraction(task.spawn[:2], task.goal, base_xy)
@@ -342,6 +353,7 @@ class AnymalToFEnv(Env):
             progress=self._progress(task, base_xy),
             num_levels=self.tmap.num_levels,
             down_progress_frac=float(self.cfg.terrain.down_progress_frac),
+            up_progress_frac=float(self.cfg.terrain.up_progress_frac),
         )
         return level, task.col
 
@@ -357,7 +369,7 @@ class AnymalToFEnv(Env):
         obs = self._observe(d, task, sense, meas)
         zero = jp.zeros(())
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
-        metrics.update({k: zero for k in EPISODE_METRICS})
+        metrics.update({k: zero for k in EPISODE_METRICS + STEP_METRICS})
         return State(
             pipeline_state=d,
             obs=obs,

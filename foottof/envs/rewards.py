@@ -17,6 +17,7 @@ DENSE_TERMS = (
     "stall",
     "jump",
     "posture",
+    "collision",
 )
 SPARSE_TERMS = ("reach", "termination")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
@@ -39,6 +40,7 @@ class RewardInputs:
       q: (12,) joint positions [rad]; default_q: (12,) nominal stance [rad].
       time_s: time since the episode started [s].
       failed: 1.0 on a failure termination; truncated: 1.0 at the time limit.
+      knee_contact: (4,) 1.0 where a knee sphere touches the terrain.
     """
 
     base_pos: jax.Array
@@ -57,6 +59,7 @@ class RewardInputs:
     time_s: jax.Array
     failed: jax.Array
     truncated: jax.Array
+    knee_contact: jax.Array
 
 
 def goal_distance(x: RewardInputs) -> jax.Array:
@@ -94,6 +97,7 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
         "stall": stalling.astype(jp.float32),
         "jump": jp.all(x.foot_contact < 0.5).astype(jp.float32),
         "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
+        "collision": jp.sum(x.knee_contact),
     }
 
 
@@ -104,6 +108,26 @@ def scaled_terms(terms: dict[str, jax.Array], scales, control_dt_s: float) -> di
         dt = control_dt_s if name in DENSE_TERMS else 1.0
         out[name] = terms[name] * float(getattr(scales, name)) * dt
     return out
+
+
+def total_reward(terms: dict[str, jax.Array], only_positive: bool, valid: jax.Array) -> jax.Array:
+    """The step reward from scaled terms: dense sum (clipped at 0 if ``only_positive``) + sparse.
+
+    ``only_positive`` is legged_gym's ``only_positive_rewards`` ("avoids early termination
+    problems"): the dense terms can make a step worth nothing but never negative, so a policy
+    learning to walk is not paid less than one standing still for each stumble; the sparse
+    ``reach`` and ``termination`` are added after the clip (as legged_gym adds termination).
+
+    Args:
+      terms: scaled terms keyed by REWARD_TERMS (scalars).
+      only_positive: clip the dense sum at 0 (static).
+      valid: 1.0 where the step's physics is valid; 0.0 on a diverged step, whose dense terms
+        (from sanitized, meaningless velocities) are dropped: it is paid its sparse terms only.
+    """
+    dense = sum(terms[k] for k in DENSE_TERMS) * valid
+    if only_positive:
+        dense = jp.maximum(dense, 0.0)
+    return dense + sum(terms[k] for k in SPARSE_TERMS)
 
 
 def check_scales(scales) -> None:

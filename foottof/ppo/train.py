@@ -309,6 +309,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
                 lr_max,
             )
             opt_state = _set_learning_rate(opt_state, lr)
+        metrics["ppo/learning_rate_mean"] = opt_state.hyperparams["learning_rate"]  # this update's
         updates, opt_state = optimizer.update(grads, opt_state, params)
         params = optax.apply_updates(params, updates)
         metrics["ppo/grad_norm"] = optax.global_norm(grads)
@@ -412,7 +413,8 @@ def _iteration_metrics(traj: Transition, sgd_metrics: dict, params, opt_state) -
     (NaN if none finished); 'train/episodes': their count; 'train/reward': mean reward per step;
     env metrics under their own names ('episode/*' averaged over done steps, others over all
     steps); 'loss/*', 'ppo/kl', 'ppo/clip_fraction', 'ppo/grad_norm' averaged over minibatches;
-    'ppo/learning_rate' after the update; 'ppo/action_std' mean std; 'ppo/params_finite' 1 or 0.
+    'ppo/learning_rate' after the update, 'ppo/learning_rate_mean' the mean rate the
+    minibatch updates used; 'ppo/action_std' mean std; 'ppo/params_finite' 1 or 0.
     """
     psum = lambda x: jax.lax.psum(x, AXIS)
     n_done = psum(jp.sum(traj.dones))

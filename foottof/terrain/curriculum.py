@@ -66,10 +66,12 @@ def update_levels(
     progress: jax.Array,
     num_levels: int,
     down_progress_frac: float = 0.5,
+    up_progress_frac: float = 1.0,
 ) -> jax.Array:
     """New curriculum levels of envs whose episode ended (others keep theirs).
 
-    An env that reached its goal moves up one level; one that solved the top level goes to a random
+    An env that reached its goal, or covered at least ``up_progress_frac`` of the distance to it
+    (legged_gym promotes on distance walked, not on full success), moves up one level; one that solved the top level goes to a random
     level ~ U{0, ..., num_levels - 1}; one that did not reach the goal and covered less than
     ``down_progress_frac`` of the distance moves down one level (not below 0); any other stays.
 
@@ -81,6 +83,8 @@ def update_levels(
       progress: (N,) fraction of the goal distance covered (see :func:`progress_fraction`).
       num_levels: number of levels (static).
       down_progress_frac: threshold on ``progress`` to move down (static), in [0, 1].
+      up_progress_frac: threshold on ``progress`` to move up without reaching the goal (static),
+        in [down_progress_frac, 1]; 1 (default) = only reaching the goal promotes.
 
     Returns:
       (N,) int32 new levels.
@@ -90,8 +94,13 @@ def update_levels(
         raise ValueError(
             f"down_progress_frac={down_progress_frac!r} outside the valid range [0, 1]"
         )
+    if not down_progress_frac <= up_progress_frac <= 1.0:
+        raise ValueError(
+            f"up_progress_frac={up_progress_frac!r} outside the valid range "
+            f"[down_progress_frac={down_progress_frac}, 1]"
+        )
     level = jp.asarray(level, jp.int32)
-    up = jp.asarray(reached_goal, bool)
+    up = jp.asarray(reached_goal, bool) | (jp.asarray(progress) >= up_progress_frac)
     down = ~up & (jp.asarray(progress) < down_progress_frac)
     new = level + up.astype(jp.int32) - down.astype(jp.int32)
     random_level = jax.random.randint(key, level.shape, 0, num_levels, dtype=jp.int32)

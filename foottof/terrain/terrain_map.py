@@ -84,6 +84,8 @@ class TerrainMapSpec:
         spawn around the start-platform centre [m, m, rad].
       goal_x_spread_m, goal_y_spread_m: uniform +- spread of the sampled goal around the
         goal-region centre [m].
+      flat: every tile is flat ground at z = 0 (same layout, spawns and goals; for learning
+        checks on flat ground, configs/flat.py); the tile types only label the columns.
     """
 
     tile: TileSpec
@@ -96,6 +98,7 @@ class TerrainMapSpec:
     spawn_yaw_spread_rad: float = 0.3
     goal_x_spread_m: float = 0.2
     goal_y_spread_m: float = 0.2
+    flat: bool = False
 
     def __post_init__(self):
         if int(self.num_levels) != self.num_levels or self.num_levels < 1:
@@ -173,6 +176,7 @@ def _spread_kwargs(cfg) -> dict:
         spawn_yaw_spread_rad=float(cfg.spawn_yaw_spread_rad),
         goal_x_spread_m=float(cfg.goal_x_spread_m),
         goal_y_spread_m=float(cfg.goal_y_spread_m),
+        flat=bool(cfg.flat),
     )
 
 
@@ -290,6 +294,8 @@ def build_terrain_map(key: jax.Array, spec: TerrainMapSpec) -> TerrainMap:
         order += idx
     tiles = jp.concatenate(blocks, axis=1)[:, np.argsort(order)]  # (L, C, ny, nx)
     heights = tiles.transpose(0, 2, 1, 3).reshape(levels * tile.ny, cols * tile.nx)
+    if spec.flat:
+        heights = jp.zeros_like(heights)
     b = spec.border_cells
     heights = jp.pad(heights, b, constant_values=0.0)
     hfield = Heightfield(

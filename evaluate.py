@@ -47,7 +47,8 @@ def _checkpoint(rb) -> str | None:
     if found is None:
         raise FileNotFoundError(
             "no policy found (looked in policies/latest and runs/*/checkpoints): train first "
-            "(python train.py --config configs/stage1.py) or pass --checkpoint PATH"
+            "(`make demo` on a CPU, python train.py --config configs/stage1.py on a GPU), pass "
+            "--checkpoint PATH, or --untrained to check the pipeline with a fresh policy"
         )
     return found
 
@@ -97,6 +98,12 @@ def _analyze(cfg, source: str, pert: str, levels: dict, ckpt, key, out: str) -> 
 def main(argv):
     del argv
     logging.set_verbosity(logging.WARNING)
+    from foottof import config_check
+
+    try:  # before JAX is imported: a bad config value fails in a second
+        config_check.check_config(_CONFIG.value)
+    except ValueError as e:
+        sys.exit(f"error: {e}")
     import jax
     from tqdm import tqdm
 

@@ -9,33 +9,57 @@ from ml_collections import config_flags
 _CONFIG = config_flags.DEFINE_config_file(
     "config", "configs/cpu.py", "Config file (configs/*.py).", lock_config=True
 )
-_RESUME = flags.DEFINE_bool("resume", False, "Continue the run in --run_dir from its latest checkpoint.")
+_RESUME = flags.DEFINE_bool(
+    "resume",
+    False,
+    "Continue a run from its latest checkpoint: --run_dir, else the latest run "
+    "<train.run_root>/<train.run_name>.",
+)
 _RUN_DIR = flags.DEFINE_string(
-    "run_dir", None, "Run directory (default: <train.run_root>/<train.run_name>)."
+    "run_dir",
+    None,
+    "Run directory. Default: a new <train.run_root>/<train.run_name>-<time> per run, with the "
+    "link <train.run_root>/<train.run_name> to the latest.",
 )
 
 
 def main(argv):
     del argv
     logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint write at INFO
-    from foottof.envs import make_training_env
-    from foottof.ppo import runner
+    from foottof import config_check
+    from foottof.ppo import run_dir as run_dirs
 
     cfg = _CONFIG.value
-    run_dir = _RUN_DIR.value or os.path.join(cfg.train.run_root, cfg.train.run_name)
-    init_from = cfg.train.init_from or None
-    if _RESUME.value:
-        init_from = None
-    elif init_from and not os.path.exists(init_from):
+    t = cfg.train
+    try:  # checks that need no JAX, env or compile come first: bad input fails in a second
+        config_check.check_config(cfg)
+        run_dir, latest = run_dirs.resolve_run_dir(
+            t.run_root, t.run_name, _RUN_DIR.value, _RESUME.value
+        )
+    except (ValueError, FileNotFoundError, FileExistsError) as e:
+        sys.exit(f"error: {e}")
+    init_from = None if _RESUME.value else (t.init_from or None)
+    if init_from and not os.path.exists(init_from):
         sys.exit(
             f"error: train.init_from={init_from!r} does not exist; train stage 1 first "
             f"(python train.py --config configs/stage1.py) or pass --config.train.init_from=PATH"
         )
+    what = "continuing" if _RESUME.value else "new run"
+    print(f"[train] {what} in {run_dir}" + (f" ({latest} links to it)" if latest else ""))
+    from foottof.envs import make_training_env
+    from foottof.ppo import runner
+
     try:
         env = make_training_env(cfg)
-        runner.run(cfg, env, run_dir, resume=_RESUME.value, init_from=init_from)
-    except (ValueError, FileNotFoundError, FileExistsError) as e:
+        runner.run(cfg, env, run_dir, resume=_RESUME.value, init_from=init_from, latest_link=latest)
+    except (ValueError, FileNotFoundError, FileExistsError, runner.NonFiniteError) as e:
         sys.exit(f"error: {e}")
+    config_file = config_flags.get_config_filename(flags.FLAGS["config"])
+    print(
+        f"[train] done: {run_dir}. Evaluate: python evaluate.py --checkpoint {run_dir}; train "
+        f"longer: python train.py --config {config_file} --run_dir {run_dir} --resume "
+        f"--config.train.num_iterations=N"
+    )
 
 
 if __name__ == "__main__":

@@ -15,6 +15,7 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
+from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 from foottof.ppo.train import TrainState
 
 ITEMS = {
@@ -24,7 +25,6 @@ ITEMS = {
     "progress": ("key", "iteration"),
     "rollout": ("env_state", "carry", "prev_done", "ep_return", "ep_length"),
 }
-CHECKPOINT_SUBDIR = "checkpoints"
 
 
 def _sub(state: TrainState, item: str) -> dict:

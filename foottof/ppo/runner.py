@@ -12,6 +12,7 @@ import ml_collections
 import numpy as np
 
 from foottof.ppo import checkpoint as ckpt
+from foottof.ppo import run_dir as run_dirs
 from foottof.ppo import train as train_lib
 
 CPU_MAX_NUM_ENVS = 256  # above this many envs on a CPU backend the run is GPU-sized: warn
@@ -158,6 +159,7 @@ def run(
     resume: bool = False,
     init_from: str | None = None,
     on_iteration: Callable[[int, dict, train_lib.TrainState], None] | None = None,
+    latest_link: str | None = None,
 ) -> train_lib.TrainState:
     """Trains for cfg.train.num_iterations iterations (counted from the start of the run).
 
@@ -172,6 +174,9 @@ def run(
         stage 1); optimizer state, iteration and envs start fresh.
       on_iteration: callback(iteration, metrics, state) after each iteration (and after the NaN
         guard); `state` is donated to the next iteration, so use it only inside the callback.
+      latest_link: a symlink pointed at run_dir when the run starts (see
+        run_dir.resolve_run_dir); if the run ends without any checkpoint, the link goes back to
+        its previous target and run_dir, if this call created it, is removed.
 
     Returns:
       The final TrainState.
@@ -183,18 +188,35 @@ def run(
     cfg = _prepare_cfg(cfg)
     if resume and init_from:
         raise ValueError("give resume=True or init_from, not both")
-    t = cfg.train
-    has_ckpt = os.path.isdir(os.path.join(run_dir, ckpt.CHECKPOINT_SUBDIR)) and any(
-        n.isdigit() for n in os.listdir(os.path.join(run_dir, ckpt.CHECKPOINT_SUBDIR))
-    )
+    has_ckpt = run_dirs.has_checkpoint(run_dir)
     if resume and not has_ckpt:
-        raise FileNotFoundError(f"resume: no checkpoint in {run_dir}/{ckpt.CHECKPOINT_SUBDIR}")
+        raise FileNotFoundError(
+            f"resume: no checkpoint in {run_dir}/{ckpt.CHECKPOINT_SUBDIR} (train.py: drop --resume)"
+        )
     if not resume and has_ckpt:
         raise FileExistsError(
-            f"{run_dir} already holds checkpoints; pass resume=True or a new run dir"
+            f"{run_dir} already holds checkpoints; pass resume=True or a new run dir "
+            f"(train.py: --resume, or another --run_dir)"
         )
     main = jax.process_index() == 0  # only process 0 writes config, logs and progress lines
+    created = not os.path.exists(run_dir)
     os.makedirs(run_dir, exist_ok=True)
+    linked, previous = False, None
+    if latest_link and main:
+        try:
+            previous, linked = run_dirs.point_latest(latest_link, run_dir), True
+        except FileExistsError as e:
+            print(f"[runner] WARNING: {e}")
+    try:
+        return _run(cfg, env, run_dir, resume, init_from, on_iteration, main)
+    finally:
+        if linked and not run_dirs.has_checkpoint(run_dir):
+            run_dirs.forget_run(latest_link, previous, run_dir if created else None)
+
+
+def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.TrainState:
+    """run() after the run-dir checks; see there."""
+    t = cfg.train
     if main:
         _write_config(cfg, run_dir)
 

@@ -1,0 +1,122 @@
+"""foottof.config_check: shipped configs pass; each bad value fails with one line naming it."""
+
+import glob
+import math
+import os
+import subprocess
+import sys
+
+import pytest
+
+from configs import load_config
+from foottof import config_check as cc
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+CONFIG_FILES = sorted(
+    p for p in glob.glob(os.path.join(ROOT, "configs", "*.py")) if not os.path.basename(p)[0] == "_"
+)
+
+
+@pytest.mark.parametrize("path", CONFIG_FILES, ids=os.path.basename)
+def test_shipped_configs_pass(path):
+    cc.check_config(load_config(path))
+
+
+def _set(cfg, dotted, value):
+    *parents, leaf = dotted.split(".")
+    section = cfg
+    for p in parents:
+        section = section[p]
+    with section.unlocked():
+        section[leaf] = value
+
+
+# (field, bad value, words the message must hold)
+BAD = [
+    ("ppo.num_envs", -1, ">= 1"),
+    ("ppo.num_envs", 66, "divisible by ppo.num_minibatches=4"),
+    ("ppo.num_minibatches", 0, ">= 1"),
+    ("ppo.gamma", 1.5, "[0, 1]"),
+    ("ppo.learning_rate", 0.5, "[ppo.lr_min, ppo.lr_max]"),
+    ("ppo.lr_schedule", "cosine", "'adaptive'"),
+    ("network.activation", "gelu", "'elu'"),
+    ("network.actor_hidden", (64, 0), "integers >= 1"),
+    ("train.num_iterations", 0, ">= 1"),
+    ("train.run_name", "a/b", "without '/'"),
+    ("env.source", "lidar", "'mock_aggre'"),
+    ("env.model.timestep", 0.05, "(0, 0.01]"),
+    ("env.model.timestep", 0.003, "whole physics steps"),
+    ("env.physics", "bullet", "'mujoco'"),
+    ("env.physics_threads", -1, ">= 0"),
+    ("env.model.solref_timeconst", 0.005, ">= 2 * env.model.timestep"),
+    ("env.randomization.friction_range", (1.2, 0.4), "low <= high"),
+    ("terrain.cell_m", 0.05, "(0, 0.04]"),
+    ("terrain.tile_length_m", 6.02, "multiple of terrain.cell_m"),
+    ("terrain.stage1_difficulty.grid_stones", (0.0, 1.5), "[0, 1]"),
+    ("sensor.rate_hz", 100.0, "(0, 60]"),
+    ("sensor.tilt_x_deg", (0.0, 0.0), "one entry per sensor.sites (4)"),
+    ("noise.stage1.missing_rate", 2.0, "[0, 1]"),
+    ("noise.model_path", "nope.json", "existing file"),
+    ("noise.stage2.min_delay_steps", 9, "<= noise.stage2.max_delay_steps=4"),
+    ("reward.scales.reach", math.nan, "finite"),
+    ("eval.odometry_levels", (0.0, 11.0), "[0, 10]"),
+    ("eval.sources", ("tof", "lidar"), "'mock_ideal'"),
+    ("seed", -3, ">= 0"),
+    ("stage", 3, "[1, 2]"),
+]
+
+
+@pytest.mark.parametrize("field,value,words", BAD, ids=[f"{f}={v}" for f, v, _ in BAD])
+def test_bad_value_is_one_line_naming_field_value_and_range(field, value, words):
+    cfg = load_config(os.path.join(ROOT, "configs", "cpu.py"))
+    _set(cfg, field, value)
+    with pytest.raises(cc.ConfigError) as e:
+        cc.check_config(cfg)
+    msg = str(e.value)
+    assert "\n" not in msg
+    assert msg.startswith(f"{field}={value!r}"), msg
+    assert words in msg, msg
+
+
+def test_missing_section_is_an_error():
+    cfg = load_config(os.path.join(ROOT, "configs", "cpu.py"))
+    del cfg["eval"]
+    with pytest.raises(cc.ConfigError, match="'eval'"):
+        cc.check_config(cfg)
+
+
+def test_every_rule_names_a_field_of_the_base_config():
+    """A renamed or dropped field must not leave a rule that silently never runs."""
+    cfg = load_config(os.path.join(ROOT, "configs", "base.py"))
+    dead = [p for p in cc.RULES if not cc._items(cfg, p)]
+    assert not dead, dead
+
+
+def test_copied_names_match_their_modules():
+    from foottof import constants, physics
+    from foottof.envs import sensing
+    from foottof.eval import robustness
+    from foottof.ppo import networks, train
+    from foottof.sensors import tof
+
+    assert cc.SOURCES == tuple(sensing.SOURCES)
+    assert cc.PHYSICS_BACKENDS == tuple(physics.BACKENDS)
+    assert cc.CONTROL_DT_S == constants.CONTROL_DT_S
+    assert cc.LR_SCHEDULES == tuple(train.LR_SCHEDULES)
+    assert cc.POLICIES == tuple(networks.POLICIES)
+    assert cc.ACTIVATIONS == tuple(networks.ACTIVATIONS)
+    assert cc.TOF_MAX_RATE_HZ == dict(tof.MAX_RATE_HZ)
+    assert cc.TILT_LIMIT_DEG == tof.TILT_LIMIT_DEG
+    assert cc.LEVEL_RANGES == {k: v for k, v in robustness.LEVEL_RANGES.items() if k != "none"}
+
+
+def test_check_imports_no_jax():
+    """What makes a bad value fail in about a second: no JAX import before the check."""
+    code = (
+        "import sys; from configs import load_config; from foottof import config_check;"
+        "config_check.check_config(load_config('configs/cpu.py'));"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'mujoco')))"
+    )
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "[]", r.stdout

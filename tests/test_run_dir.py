@@ -1,0 +1,77 @@
+"""foottof.ppo.run_dir: a new folder per train.py run, the latest linked; errors name CLI flags."""
+
+import os
+
+import pytest
+
+from foottof.ppo import run_dir as rd
+
+
+def _fake_run(path, step=10):
+    os.makedirs(os.path.join(path, rd.CHECKPOINT_SUBDIR, str(step)))
+    return path
+
+
+def test_each_run_gets_a_new_folder_even_within_one_second(tmp_path):
+    root = str(tmp_path)
+    a = rd.new_run_dir(root, "cpu", now=0.0)
+    os.makedirs(a)
+    b = rd.new_run_dir(root, "cpu", now=0.0)
+    assert a != b and not os.path.exists(b)
+    assert os.path.basename(a).startswith("cpu-") and os.path.dirname(a) == root
+
+
+def test_default_run_dir_is_new_and_the_link_follows_the_latest(tmp_path):
+    root = str(tmp_path)
+    first, link = rd.resolve_run_dir(root, "cpu", None, resume=False)
+    assert link == os.path.join(root, "cpu") and first != link
+    _fake_run(first)
+    assert rd.point_latest(link, first) is None
+    second, _ = rd.resolve_run_dir(root, "cpu", None, resume=False)  # `make demo` again: no error
+    assert second != first
+    os.makedirs(second)
+    assert rd.point_latest(link, second) == os.path.basename(first)
+    assert os.path.realpath(link) == os.path.realpath(second)
+    assert not os.path.isabs(os.readlink(link))  # relative: the runs folder can be moved
+    _fake_run(second)
+    resumed, no_link = rd.resolve_run_dir(root, "cpu", None, resume=True)
+    assert os.path.realpath(resumed) == os.path.realpath(second) and no_link is None
+
+
+def test_forget_run_restores_the_previous_latest(tmp_path):
+    root = str(tmp_path)
+    link = os.path.join(root, "cpu")
+    good = _fake_run(os.path.join(root, "cpu-1"))
+    rd.point_latest(link, good)
+    failed = os.path.join(root, "cpu-2")
+    os.makedirs(failed)
+    previous = rd.point_latest(link, failed)
+    rd.forget_run(link, previous, failed)
+    assert os.path.realpath(link) == os.path.realpath(good) and not os.path.exists(failed)
+    rd.forget_run(link, None, None)  # the first run ever saved nothing: no link at all
+    assert not os.path.lexists(link)
+
+
+def test_existing_run_in_explicit_run_dir_names_the_flags(tmp_path):
+    run = _fake_run(str(tmp_path / "mine"))
+    with pytest.raises(FileExistsError) as e:
+        rd.resolve_run_dir(str(tmp_path), "cpu", run, resume=False)
+    msg = str(e.value)
+    assert "--resume" in msg and "--run_dir" in msg and "resume=True" not in msg
+    assert rd.resolve_run_dir(str(tmp_path), "cpu", run, resume=True) == (run, None)
+
+
+def test_resume_without_a_run_names_the_flags(tmp_path):
+    with pytest.raises(FileNotFoundError, match="--resume.*--run_dir"):
+        rd.resolve_run_dir(str(tmp_path), "cpu", None, resume=True)
+    with pytest.raises(FileNotFoundError, match="drop --resume"):
+        rd.resolve_run_dir(str(tmp_path), "cpu", str(tmp_path / "empty"), resume=True)
+
+
+def test_a_real_folder_at_the_link_path_is_left_alone(tmp_path):
+    """runs/<name> from before timestamped runs: resumable as is, never replaced by a link."""
+    old = _fake_run(str(tmp_path / "cpu"))
+    assert rd.resolve_run_dir(str(tmp_path), "cpu", None, resume=True) == (old, None)
+    with pytest.raises(FileExistsError):
+        rd.point_latest(old, str(tmp_path / "cpu-new"))
+    assert os.path.isdir(os.path.join(old, rd.CHECKPOINT_SUBDIR, "10"))

@@ -80,7 +80,7 @@ def format_line(it: int, total: int, sps: float, eta_s: float, m: dict) -> str:
         f"loss pi {g('loss/policy'):.3g} v {g('loss/value'):.3g} ent {g('loss/entropy'):.3g}"
     )
     parts.append(
-        f"kl {g('ppo/kl'):.3g} lr {g('ppo/learning_rate'):.2e} std {g('ppo/action_std'):.3g}"
+        f"kl {g('ppo/kl'):.3g} lr {g('ppo/learning_rate_mean'):.2e} std {g('ppo/action_std'):.3g}"
     )
     rewards = [
         f"{k[len('reward/') :]} {v:.3g}" for k, v in sorted(m.items()) if k.startswith("reward/")

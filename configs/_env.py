@@ -22,7 +22,7 @@ def get_model_section() -> ml_collections.ConfigDict:
     m.cone = "pyramidal"  # friction cone: pyramidal | elliptic
     m.impratio = 100.0  # friction-to-normal impedance ratio [-]; 1 lets standing feet creep
     m.eulerdamp = False  # implicit joint damping in the Euler integrator (off: faster)
-    m.timestep = 0.005  # physics step [s] (200 Hz; constants.PHYSICS_DT_S)
+    m.timestep = 0.005  # physics step [s] (200 Hz); must divide constants.CONTROL_DT_S
     return m
 
 
@@ -39,6 +39,8 @@ def get_control_section() -> ml_collections.ConfigDict:
 
 def get_section() -> ml_collections.ConfigDict:
     e = ml_collections.ConfigDict()
+    e.physics = "auto"  # auto (MuJoCo C on a CPU JAX backend, else MJX) | mjx | mujoco
+    e.physics_threads = 0  # MuJoCo C threads (env.physics = mujoco); 0 = os.cpu_count()
     e.model = get_model_section()  # physics: make_model(hfield, tof_tilt_deg=..., **env.model)
     e.control = get_control_section()  # PD law: pd_torque(q_target, q, qd, **env.control)
     return e

@@ -1,4 +1,4 @@
-"""Goal-reaching ANYmal-D environment on discrete terrain with foot ToF sensing (Brax Env, MJX)."""
+"""Goal-reaching ANYmal-D environment on discrete terrain with foot ToF sensing (Brax Env)."""
 
 from __future__ import annotations
 
@@ -6,18 +6,16 @@ import math
 
 import jax
 import jax.numpy as jp
-import mujoco
-import numpy as np
 from brax.envs.base import Env, State
 from flax import struct
-from mujoco import mjx
 
 from foottof import constants
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
 from foottof.eval.elevation_map import noisy_odometry
-from foottof.robot import control, kinematics
+from foottof.physics import make_physics
+from foottof.robot import kinematics
 from foottof.robot.model import (
     BASE_SPHERE_CENTRES_M,
     BASE_SPHERE_RADIUS_M,
@@ -118,16 +116,14 @@ class AnymalToFEnv(Env):
         self.tmap = terrain_map
         self.hfield = terrain_map.hfield.clipped()
         self.mj_model = make_model(terrain_map.hfield, shank_scale=self.shank_scale, **model_kw)
-        self.mx = mjx.put_model(self.mj_model)
-        d0 = mujoco.MjData(self.mj_model)
-        mujoco.mj_resetDataKeyframe(self.mj_model, d0, 0)
-        mujoco.mj_forward(self.mj_model, d0)
-        self._d0 = mjx.put_data(self.mj_model, d0)
-        self._foot_geom_ids = np.array(
-            [self.mj_model.geom(n).id for n in constants.FOOT_GEOMS], np.int32
+        # Physics backend (env.physics: MJX or MuJoCo C); the PD gains come per step.
+        drive = {k: v for k, v in dict(ecfg.control).items() if k not in ("kp", "kd")}
+        self.physics = make_physics(
+            str(ecfg.get("physics", "auto")),
+            self.mj_model,
+            drive,
+            int(ecfg.get("physics_threads", 0)),
         )
-        self._base_body_id = self.mj_model.body(constants.BASE_BODY).id
-        self._base_mass = float(self.mj_model.body_mass[self._base_body_id])
         self._default_q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
         self._stand_height = kinematics.nominal_base_height(
             constants.DEFAULT_POSE, self.shank_scale, self.foot_radius_m
@@ -153,7 +149,7 @@ class AnymalToFEnv(Env):
 
     @property
     def backend(self) -> str:
-        return "mjx"
+        return self.physics.name  # "mjx" | "mujoco"
 
     def reset(self, rng: jax.Array) -> State:
         """Starts an episode on a random tile at curriculum level drawn from the initial range."""
@@ -197,11 +193,10 @@ class AnymalToFEnv(Env):
         push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
         push = push * float(self.cfg.env.randomization.push_vel_ms) * push_now
         d = d.replace(qvel=d.qvel.at[0:2].add(push))
-        mx = self._episode_model(p)
-        ccfg = dict(self.cfg.env.control)
-        kp = float(ccfg.pop("kp")) * p.kp_scale * p.motor_strength
-        kd = float(ccfg.pop("kd")) * p.kd_scale * p.motor_strength
-        d, taus = control.control_step(mx, d, q_target, kp, kd, **ccfg)
+        ccfg = self.cfg.env.control
+        kp = float(ccfg.kp) * p.kp_scale * p.motor_strength
+        kd = float(ccfg.kd) * p.kd_scale * p.motor_strength
+        d, taus = self.physics.step(d, q_target, kp, kd, p.friction, p.added_mass_kg)
         # A diverged simulation (non-finite or absurd velocities) ends the episode as a failure;
         # sanitize so that no inf/NaN reaches rewards or observations before the auto-reset.
         max_speed = float(self.cfg.env.max_joint_speed_rads)
@@ -303,12 +298,6 @@ class AnymalToFEnv(Env):
 
     # ----------------------------------------------------------------------------------------
     # Internals
-    def _episode_model(self, p: EpisodeParams) -> mjx.Model:
-        """The MJX model with this episode's foot friction and base mass (only these leaves vary)."""
-        fr = self.mx.geom_friction.at[self._foot_geom_ids, 0].set(p.friction)
-        mass = self.mx.body_mass.at[self._base_body_id].set(self._base_mass + p.added_mass_kg)
-        return self.mx.replace(geom_friction=fr, body_mass=mass)
-
     def _foot_kinematics(self, d) -> tuple[kinematics.FootKinematics, jax.Array]:
         """World FK of the physics model and (4, 3) world foot-centre velocities (FK Jacobian)."""
         qpos, qvel = d.qpos, d.qvel
@@ -396,12 +385,7 @@ class AnymalToFEnv(Env):
         quat = _euler_to_quat(rp[0], rp[1], spawn[2])
         z = spawn[3] + self._stand_height + float(self.cfg.env.spawn_height_offset_m)
         qpos = jp.concatenate([jp.array([spawn[0], spawn[1]]), z[None], quat, q0])
-        d = self._d0.replace(
-            qpos=qpos.astype(self._d0.qpos.dtype),
-            qvel=jp.zeros_like(self._d0.qvel),
-            qacc_warmstart=jp.zeros_like(self._d0.qacc_warmstart),
-            ctrl=jp.zeros_like(self._d0.ctrl),
-        )
+        d = self.physics.init(qpos)  # at rest
         task = TaskState(
             rng=key_rng,
             step=jp.zeros((), jp.int32),

@@ -1,12 +1,23 @@
-"""Joint PD law with drive torque limits, and the control step (PD + physics substeps) in MJX."""
+"""Joint PD law with drive torque limits (NumPy or JAX), and the MJX control step (PD + substeps).
+
+The PD law is written once for both physics backends: :func:`pd_torque` runs on NumPy arrays (the
+MuJoCo C backend's host callback, float64) and on JAX arrays (MJX, inside the compiled step).
+"""
 
 from __future__ import annotations
 
 import jax
 import jax.numpy as jp
+import numpy as np
 from mujoco import mjx
 
 from foottof import constants
+
+
+def _xp(*arrays):
+    """``numpy`` if every argument is a NumPy array or a Python/NumPy scalar, else ``jax.numpy``."""
+    host = all(isinstance(a, (np.ndarray, np.generic, float, int)) for a in arrays)
+    return np if host else jp
 
 
 def torque_bounds(
@@ -23,12 +34,14 @@ def torque_bounds(
     the torque that drives the joint further in its direction of motion falls linearly to 0 at
     ``v_lim``, while braking torque stays available. With ``saturation_torque=None`` the bounds
     are the constant +-``torque_limit`` (no speed dependence; ``velocity_limit`` unused).
+    NumPy in, NumPy out (the MuJoCo C backend); otherwise JAX.
     """
+    xp = _xp(qd)
     if saturation_torque is None:
-        lim = jp.full_like(qd, torque_limit)
+        lim = xp.full_like(qd, torque_limit)
         return -lim, lim
-    upper = jp.clip(saturation_torque * (1.0 - qd / velocity_limit), 0.0, torque_limit)
-    lower = jp.clip(saturation_torque * (-1.0 - qd / velocity_limit), -torque_limit, 0.0)
+    upper = xp.clip(saturation_torque * (1.0 - qd / velocity_limit), 0.0, torque_limit)
+    lower = xp.clip(saturation_torque * (-1.0 - qd / velocity_limit), -torque_limit, 0.0)
     return lower, upper
 
 
@@ -56,11 +69,11 @@ def pd_torque(
         (see :func:`torque_bounds`).
 
     Returns:
-      (..., 12) joint torques [N m].
+      (..., 12) joint torques [N m]: NumPy if all array inputs are NumPy, else JAX.
     """
     tau = kp * (q_target - q) - kd * qd
     lower, upper = torque_bounds(qd, torque_limit, velocity_limit, saturation_torque)
-    return jp.clip(tau, lower, upper)
+    return _xp(tau, lower, upper).clip(tau, lower, upper)
 
 
 def control_step(

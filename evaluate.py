@@ -108,11 +108,12 @@ def main(argv):
     from tqdm import tqdm
 
     from foottof.eval import robustness as rb
+    from foottof.perception import check_source
 
     cfg = _CONFIG.value
     out = _OUT.value or cfg.eval.out_dir
     try:
-        sources = rb.check_source(_SOURCE.value)
+        sources = check_source(_SOURCE.value)
         pert = _PERT.value
         levels = _levels(rb, cfg, pert)
         if _EPISODES.value is not None:

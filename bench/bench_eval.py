@@ -24,6 +24,7 @@ import jax  # noqa: E402
 from configs import load_config  # noqa: E402
 from foottof.envs import make_env  # noqa: E402
 from foottof.eval import robustness as rb  # noqa: E402
+from foottof.perception import check_source  # noqa: E402
 
 
 def _gpu_peak_mib() -> str:
@@ -43,7 +44,7 @@ def main() -> None:
     p.add_argument("--config", default="configs/base.py")
     args = p.parse_args()
     for s in args.sources:
-        rb.check_source(s)
+        check_source(s, allow_all=False)
     cfg = load_config(args.config)
     key = jax.random.PRNGKey(0)
     c, _ = rb.eval_config(cfg, "none", 0.0)

@@ -6,9 +6,10 @@ import os
 
 import ml_collections
 
+from foottof.perception import SOURCES  # imports no JAX
+
 SECTIONS = ("terrain", "sensor", "noise", "env", "reward", "ppo", "network", "train", "eval")
 # Copies of names defined in modules that import JAX (tests/test_config_check.py keeps them equal).
-SOURCES = ("tof", "mock_ideal", "mock_aggre")  # foottof.envs.sensing.SOURCES
 PHYSICS_BACKENDS = ("auto", "mjx", "mujoco")  # foottof.physics.BACKENDS
 LR_SCHEDULES = ("adaptive", "fixed")  # foottof.ppo.train.LR_SCHEDULES
 POLICIES = ("lstm", "mlp")  # foottof.ppo.networks.POLICIES

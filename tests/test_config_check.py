@@ -93,13 +93,12 @@ def test_every_rule_names_a_field_of_the_base_config():
 
 
 def test_copied_names_match_their_modules():
-    from foottof import constants, physics
-    from foottof.envs import sensing
+    from foottof import constants, perception, physics
     from foottof.eval import robustness
     from foottof.ppo import networks, train
     from foottof.sensors import tof
 
-    assert cc.SOURCES == tuple(sensing.SOURCES)
+    assert cc.SOURCES == tuple(perception.SOURCES)
     assert cc.PHYSICS_BACKENDS == tuple(physics.BACKENDS)
     assert cc.CONTROL_DT_S == constants.CONTROL_DT_S
     assert cc.LR_SCHEDULES == tuple(train.LR_SCHEDULES)

@@ -19,6 +19,7 @@ import pytest
 from configs import smoke
 from foottof.eval import plots
 from foottof.eval import robustness as rb
+from foottof.perception import check_source
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -82,9 +83,9 @@ def test_wilson_interval_hand_computed():
 
 
 def test_check_inputs():
-    assert rb.check_source("all") == ("tof", "mock_ideal", "mock_aggre")
+    assert check_source("all") == ("tof", "mock_ideal", "mock_aggre")
     with pytest.raises(ValueError, match=r"unknown source 'lidar'.*mock_aggre"):
-        rb.check_source("lidar")
+        check_source("lidar")
     with pytest.raises(ValueError, match=r"unknown perturbation 'wind'.*odometry"):
         rb.check_levels("wind", [0.0])
     with pytest.raises(ValueError, match=r"joint_offset level 0.5 outside .*\[0.0, 0.3\]"):

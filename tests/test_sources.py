@@ -1,4 +1,4 @@
-"""Tests of foottof.eval: cameras, ideal scan, aggregated elevation map and mock foot readings."""
+"""Tests of foottof.perception: cameras, ideal scan, aggregated map, odometry, mock readings."""
 
 import math
 
@@ -8,10 +8,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from foottof import constants
-from foottof.eval import cameras as cam_lib
-from foottof.eval import elevation_map as em
-from foottof.eval import sources
+from foottof import constants, perception
+from foottof.perception import cameras as cam_lib
+from foottof.perception import elevation_map as em
+from foottof.perception import odometry as odom
+from foottof.perception import sources
 from foottof.robot import kinematics as kin
 from foottof.sensors import tof
 from foottof.terrain.heightfield import Heightfield, hfield_xml, write_to_mjmodel
@@ -180,7 +181,7 @@ def _run_map(hf, traj, levels, keys, see_all=False):
 
         def step(state, xs):
             p, q, v, w, k = xs
-            v_est, w_est = em.noisy_odometry(k, v, w, level)
+            v_est, w_est = odom.noisy_odometry(k, v, w, level)
             return em.aggre_update(state, hf, p, q, v_est, w_est, DT, see_all=see_all), None
 
         ks = jax.random.split(key, pos.shape[0] - 1)
@@ -281,7 +282,7 @@ def test_update_bad_dt_and_level_raise(stones_hf):
         em.aggre_update(state, stones_hf, jp.array([2.0, 2.0, 0.6]), jp.array([1.0, 0, 0, 0]),
                         jp.zeros(3), jp.zeros(3), 0.0)
     with pytest.raises(ValueError, match="level=-1"):
-        em.noisy_odometry(jax.random.key(0), jp.zeros(3), jp.zeros(3), -1.0)
+        odom.noisy_odometry(jax.random.key(0), jp.zeros(3), jp.zeros(3), -1.0)
 
 
 def test_map_without_prior_starts_blind_under_the_belly(stones_hf):
@@ -520,4 +521,4 @@ def test_bad_sensor_feet_and_source_raise(stones_hf):
         sources.readings_from_scan(TOF, jp.zeros((101, 101)), jp.array([1.0, 0, 0, 0]), q,
                                    sensor_feet=(0, 1, 2, 7))
     with pytest.raises(ValueError, match="mock_ideal"):
-        sources.check_source("mock_height")
+        perception.check_source("mock_height")

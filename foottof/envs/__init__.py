@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from brax.envs.wrappers.training import VmapWrapper
 
-from foottof.envs.anymal_tof import SOURCES, AnymalToFEnv
+from foottof.envs.anymal_tof import AnymalToFEnv
 
 
 def make_env(cfg, source: str | None = None, **kwargs) -> AnymalToFEnv:
@@ -17,4 +17,4 @@ def make_training_env(cfg, **kwargs):
     return VmapWrapper(make_env(cfg, **kwargs))
 
 
-__all__ = ["SOURCES", "AnymalToFEnv", "make_env", "make_training_env"]
+__all__ = ["AnymalToFEnv", "make_env", "make_training_env"]

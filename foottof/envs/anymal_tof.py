@@ -13,7 +13,8 @@ from foottof import constants
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
-from foottof.eval.elevation_map import noisy_odometry
+from foottof.perception import check_source
+from foottof.perception.odometry import noisy_odometry
 from foottof.physics import make_physics
 from foottof.robot import kinematics
 from foottof.robot.model import (
@@ -30,7 +31,6 @@ from foottof.terrain.terrain_map import (
     sample_spawn_goal,
 )
 
-SOURCES = sensing.SOURCES
 EPISODE_METRICS = (
     "episode/success",
     "episode/failed",
@@ -87,7 +87,7 @@ class AnymalToFEnv(Env):
 
     Args:
       cfg: the full config (configs/base.py layout).
-      source: foot-reading source, one of SOURCES.
+      source: foot-reading source, one of foottof.perception.SOURCES.
       terrain_map: a prebuilt map (default: built from ``cfg.terrain`` for ``cfg.stage``).
       shank_scale: shank length scale of the *physics* model (evaluation perturbation); the
         policy-side kinematics stay nominal.
@@ -100,8 +100,7 @@ class AnymalToFEnv(Env):
         terrain_map: TerrainMap | None = None,
         shank_scale: float | None = None,
     ):
-        if source not in SOURCES:
-            raise ValueError(f"unknown source {source!r}; valid sources: {list(SOURCES)}")
+        check_source(source, allow_all=False)
         rw.check_scales(cfg.reward.scales)
         self.cfg = cfg
         self.source = source

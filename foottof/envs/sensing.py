@@ -8,14 +8,13 @@ import numpy as np
 from flax import struct
 
 from foottof import constants
-from foottof.eval import elevation_map as em
-from foottof.eval import sources as mock
+from foottof.perception import check_source
+from foottof.perception import elevation_map as em
+from foottof.perception import sources as mock
 from foottof.robot import kinematics
 from foottof.sensors import degradation as deg
 from foottof.sensors import tof
 from foottof.sensors.noise_model import load_model
-
-SOURCES = mock.SOURCES  # ("tof", "mock_ideal", "mock_aggre")
 
 
 @struct.dataclass
@@ -69,12 +68,11 @@ class Sensing:
     ``tof`` casts the foot rays on the terrain from the true sensor poses (physics model, incl.
     any shank-length change); ``mock_ideal`` / ``mock_aggre`` cast the same rays into an ideal
     height scan / an aggregated elevation map from poses given by the *measured* joints through
-    the *nominal* kinematics (foottof.eval.sources).
+    the *nominal* kinematics (foottof.perception.sources).
     """
 
     def __init__(self, cfg, source: str, hfield, shank_scale: float):
-        if source not in SOURCES:
-            raise ValueError(f"unknown source {source!r}; valid sources: {list(SOURCES)}")
+        check_source(source, allow_all=False)
         self.source = source
         self.hfield = hfield
         self.shank_scale = float(shank_scale)

@@ -24,7 +24,7 @@ def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
 
     Args:
       cfg: full config.
-      source: foot-reading source, one of foottof.envs.SOURCES.
+      source: foot-reading source, one of foottof.perception.SOURCES.
       checkpoint: checkpoint path, or None for a freshly initialized policy.
       key: PRNG key (terrain map, policy init, episode).
       perturbation, level: the perturbation cell (see foottof.eval.robustness).

@@ -29,7 +29,8 @@ import jax.numpy as jp
 import ml_collections
 import numpy as np
 
-from foottof.envs import SOURCES, make_env
+from foottof.envs import make_env
+from foottof.perception import check_source
 from foottof.ppo.checkpoint import load_params_and_normalizer
 from foottof.ppo.networks import make_networks
 
@@ -136,15 +137,6 @@ def summarize(source: str, perturbation: str, level: float, outcomes: dict) -> d
         "mean_speed_ms": float(np.mean(outcomes["mean_speed_ms"])) if n else float("nan"),
         "falls": int(outcomes["failed"].sum()),
     }
-
-
-def check_source(source: str) -> tuple[str, ...]:
-    """Sources to run for the --source flag ('all' = every source)."""
-    if source == "all":
-        return tuple(SOURCES)
-    if source not in SOURCES:
-        raise ValueError(f"unknown source {source!r}; valid choices: {['all', *SOURCES]}")
-    return (source,)
 
 
 def check_levels(perturbation: str, levels) -> tuple[float, ...]:
@@ -375,7 +367,7 @@ def evaluate_sweep(
     Returns:
       One result row (keys RESULT_KEYS) per level, in the order of ``levels``.
     """
-    check_source(source)
+    check_source(source, allow_all=False)
     levels = check_levels(perturbation, levels)
     episodes, num_envs = int(cfg.eval.episodes), int(cfg.eval.num_envs)
     if episodes < 1 or num_envs < 1:

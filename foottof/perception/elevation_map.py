@@ -6,7 +6,7 @@ import jax
 import jax.numpy as jp
 from flax import struct
 
-from foottof.eval import cameras as cam_lib
+from foottof.perception import cameras as cam_lib
 from foottof.robot.kinematics import quat_to_mat
 from foottof.terrain.heightfield import Heightfield
 
@@ -27,10 +27,6 @@ UNKNOWN_HEIGHT_M = SCAN_Z_FLOOR_M
 # 5 m x 5 m scan at any yaw (2.5 * sqrt(2) = 3.54 m) plus one cell of scroll slack.
 MAP_N = 145  # stored vertices per side
 _MAP_C = (MAP_N - 1) // 2  # index of the centre vertex
-
-# Odometry (estimated base velocity) noise at the 100 % level: uniform per axis, per step (paper).
-ODOM_LIN_NOISE_MS = 0.1  # linear velocity noise half-width [m/s]
-ODOM_ANG_NOISE_RADS = 0.2  # angular velocity noise half-width [rad/s]
 
 
 def scan_heightfield(heights: jax.Array) -> Heightfield:
@@ -352,32 +348,6 @@ def aggre_update(
     state = _scroll(state)  # reset: back to centre index 0
     state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all, reset)
     return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)
-
-
-def noisy_odometry(
-    key: jax.Array, lin_vel_base: jax.Array, ang_vel_base: jax.Array, level: float
-) -> tuple[jax.Array, jax.Array]:
-    """Estimated base velocities: truth plus uniform per-axis noise scaled by ``level``.
-
-    Args:
-      key: PRNG key for this step's noise.
-      lin_vel_base: (..., 3) true linear velocity in the base frame [m/s].
-      ang_vel_base: (..., 3) true angular velocity in the base frame [rad/s].
-      level: noise level, 1.0 = 100 % (+-0.1 m/s, +-0.2 rad/s); >= 0.
-
-    Returns:
-      (lin_vel_est (..., 3), ang_vel_est (..., 3)).
-    """
-    if isinstance(level, (int, float)) and not level >= 0.0:
-        raise ValueError(f"odometry noise level={level} must be >= 0 (1.0 = 100 %)")
-    key_lin, key_ang = jax.random.split(key)
-    # lin noise ~ U(-0.1 level, 0.1 level) m/s, ang noise ~ U(-0.2 level, 0.2 level) rad/s per axis.
-    n_lin = jax.random.uniform(key_lin, lin_vel_base.shape, lin_vel_base.dtype, -1.0, 1.0)
-    n_ang = jax.random.uniform(key_ang, ang_vel_base.shape, ang_vel_base.dtype, -1.0, 1.0)
-    return (
-        lin_vel_base + level * ODOM_LIN_NOISE_MS * n_lin,
-        ang_vel_base + level * ODOM_ANG_NOISE_RADS * n_ang,
-    )
 
 
 def memory_error(state: ElevationMapState, ideal_scan: jax.Array) -> tuple[jax.Array, jax.Array]:

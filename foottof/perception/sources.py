@@ -1,4 +1,4 @@
-"""Foot-reading sources of the robustness evaluation: ``tof`` and the base-centric mocks."""
+"""Mock foot readings: the ToF rays cast into the ideal scan (mock_ideal) or the map (mock_aggre)."""
 
 from __future__ import annotations
 
@@ -6,22 +6,10 @@ import jax
 import jax.numpy as jp
 
 from foottof import constants
-from foottof.eval import elevation_map as em
+from foottof.perception import elevation_map as em
 from foottof.robot.kinematics import forward_kinematics
 from foottof.sensors import tof
 from foottof.terrain.heightfield import Heightfield
-
-# tof: rays cast from the simulated foot sensor sites on the terrain (foottof.sensors.tof.sense).
-# mock_ideal: the same rays cast on the ideal 5 m x 5 m, 5 cm height scan around the base, from
-#   sensor poses computed from the measured joints through the nominal kinematics.
-# mock_aggre: as mock_ideal, on the camera-aggregated elevation map (elevation_map.aggre_*).
-SOURCES = ("tof", "mock_ideal", "mock_aggre")
-
-
-def check_source(name: str) -> None:
-    """ValueError naming the choices if ``name`` is not a foot-reading source."""
-    if name not in SOURCES:
-        raise ValueError(f"foot-reading source must be one of {SOURCES}, got {name!r}")
 
 
 def _check_sensor_feet(spec: tof.ToFSpec, sensor_feet) -> tuple[int, ...]:

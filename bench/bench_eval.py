@@ -22,8 +22,8 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 import jax  # noqa: E402
 
 from configs import load_config  # noqa: E402
-from foottof.envs import make_env  # noqa: E402
 from foottof.eval import robustness as rb  # noqa: E402
+from foottof.eval.harness import make_eval_env_and_policy  # noqa: E402
 from foottof.perception import check_source  # noqa: E402
 
 
@@ -47,16 +47,12 @@ def main() -> None:
         check_source(s, allow_all=False)
     cfg = load_config(args.config)
     key = jax.random.PRNGKey(0)
-    c, _ = rb.eval_config(cfg, "none", 0.0)
-    tmap = rb.eval_terrain_map(c, key)
     print(f"device: {jax.devices()[0].device_kind}  config: {args.config}  steps: {args.steps}")
     print(f"{'source':<11}{'envs':>6}{'compile s':>11}{'env-steps/s':>13}{'1000 ep. cell':>15}"
           f"{'RSS MiB':>9}{'GPU MiB':>9}")
     for source in args.sources:
-        env = make_env(c, source=source, terrain_map=tmap)
+        env, nets, params, norm = make_eval_env_and_policy(cfg, source, None, key, key)
         for n in args.envs:
-            obs = jax.jit(jax.vmap(env.reset))(jax.random.split(key, n)).obs
-            nets, params, norm = rb.load_policy(c, env, obs, None, key)
             rollout = rb.make_rollout(env, nets, n, args.steps)
             t0 = time.perf_counter()
             jax.block_until_ready(rollout(params, norm, key, 0.0))

@@ -17,8 +17,7 @@ import pytest
 
 from configs import smoke
 from foottof import constants
-from foottof.eval import analysis, video
-from foottof.eval import robustness as rb
+from foottof.eval import analysis, harness, video
 from foottof.ppo import export
 
 KEY = jax.random.PRNGKey(3)
@@ -102,12 +101,12 @@ def test_numpy_export_matches_jax_over_recorded_episode(episode, tmp_path):
     """The exported NumPy policy reproduces the JAX policy's actions over the recorded ANYmal
     observations (LSTM carried over the episode), with a non-trivial normalizer and output."""
     cfg, env, trace = episode
-    c, _ = rb.eval_config(cfg, "none", 0.0)
+    c, _ = harness.eval_config(cfg, "none", 0.0)
     obs0 = {"state": jp.asarray(trace["policy_obs"][:1]),
             "privileged_state": jp.zeros((1, env.observation_size["privileged_state"]))}
     # The fresh policy that record_episode ran (same key split) reproduces its actions.
     key_init = jax.random.split(KEY, 3)[1]
-    nets, params, norm = rb.load_policy(c, env, obs0, None, key_init)
+    nets, params, norm = harness.load_policy(c, env, obs0, None, key_init)
 
     def replay(params, norm):
         act = jax.jit(nets.policy_fn(params, norm, deterministic=True))

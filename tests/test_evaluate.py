@@ -17,9 +17,10 @@ import numpy as np
 import pytest
 
 from configs import smoke
-from foottof.eval import plots
+from foottof.eval import harness, plots, results
 from foottof.eval import robustness as rb
 from foottof.perception import check_source
+from foottof.ppo import run_dir
 
 REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
@@ -51,7 +52,7 @@ def test_first_episode_outcomes_hand_checked():
     np.testing.assert_array_equal(out["length"], [2, 5, 4, 5])
     # env0: mean(0, 4) = 2; env1: mean(1,5,9,13,17) = 9; env2: mean(2,6,10,14) = 8
     np.testing.assert_allclose(out["mean_speed_ms"], [2.0, 9.0, 8.0, 9.0 + 2.0])
-    row = rb.summarize("tof", "none", 0.0, out)
+    row = results.summarize("tof", "none", 0.0, out)
     assert (row["episodes"], row["successes"], row["falls"]) == (4, 1, 1)
     assert row["success_rate"] == 0.25
 
@@ -72,14 +73,14 @@ def test_first_episode_outcomes_random_property():
 def test_wilson_interval_hand_computed():
     # 8 / 10, z = 1.96: centre = (0.8 + 0.19208) / 1.38416 = 0.716738,
     # half = 1.96 * sqrt(0.016 + 0.009604) / 1.38416 = 0.226581 -> [0.49016, 0.94332]
-    lo, hi = rb.wilson_interval(8, 10)
+    lo, hi = results.wilson_interval(8, 10)
     assert lo == pytest.approx(0.49016, abs=2e-5)
     assert hi == pytest.approx(0.94332, abs=2e-5)
-    assert rb.wilson_interval(0, 0) == (0.0, 1.0)
-    lo, hi = rb.wilson_interval(0, 20)
+    assert results.wilson_interval(0, 0) == (0.0, 1.0)
+    lo, hi = results.wilson_interval(0, 20)
     assert lo == 0.0 and hi == pytest.approx(3.8415 / (20 + 3.8415), abs=1e-4)
     with pytest.raises(ValueError, match="successes=5, n=3"):
-        rb.wilson_interval(5, 3)
+        results.wilson_interval(5, 3)
 
 
 def test_check_inputs():
@@ -103,8 +104,8 @@ def test_check_inputs():
 def test_robustness_png_panels_without_data():
     rows = [
         {"source": s, "perturbation": "odometry", "level": lv, "episodes": 10, "successes": k,
-         "success_rate": k / 10, "ci_low": rb.wilson_interval(k, 10)[0],
-         "ci_high": rb.wilson_interval(k, 10)[1], "mean_speed_ms": 0.5, "falls": 1}
+         "success_rate": k / 10, "ci_low": results.wilson_interval(k, 10)[0],
+         "ci_high": results.wilson_interval(k, 10)[1], "mean_speed_ms": 0.5, "falls": 1}
         for s in ("tof", "mock_aggre") for lv, k in ((0.0, 9), (2.0, 5))
     ]
     png = plots.robustness_png(rows)
@@ -117,7 +118,7 @@ def test_write_atomic_leaves_nothing_on_error(tmp_path):
     bad = str(tmp_path / "missing_dir_is_a_file" / "b.csv")
     (tmp_path / "missing_dir_is_a_file").write_text("x")  # a file where a folder is needed
     with pytest.raises(OSError):
-        rb.write_atomic({good: b"{}", bad: b"x"})
+        results.write_atomic({good: b"{}", bad: b"x"})
     assert sorted(os.listdir(tmp_path)) == ["missing_dir_is_a_file"]
 
 
@@ -155,8 +156,8 @@ def e2e(tmp_path_factory):
     out = str(tmp_path_factory.mktemp("eval"))
     rows = rb.evaluate_sweep(cfg, "mock_ideal", "odometry", (0.0, 2.0), None,
                              jax.random.PRNGKey(0))  # one compile for both levels
-    doc = rb.results_document(rows, None, cfg.env.episode_length_s)
-    paths = rb.write_results(out, "mock_ideal", "odometry", doc)
+    doc = results.results_document(rows, None, cfg.env.episode_length_s)
+    paths = results.write_results(out, "mock_ideal", "odometry", doc)
     return cfg, out, rows, paths
 
 
@@ -167,20 +168,20 @@ def test_end_to_end_writes_outputs(e2e):
     ]
     with open(paths["json"]) as f:
         doc = json.load(f)
-    assert tuple(doc) == rb.TOP_KEYS  # schema: exact key sets
+    assert tuple(doc) == results.TOP_KEYS  # schema: exact key sets
     assert len(doc["results"]) == 2
     for r, level in zip(doc["results"], (0.0, 2.0), strict=True):
-        assert tuple(r) == rb.RESULT_KEYS
+        assert tuple(r) == results.RESULT_KEYS
         assert (r["source"], r["perturbation"], r["level"]) == ("mock_ideal", "odometry", level)
         assert r["episodes"] == 4 and 0 <= r["successes"] <= 4 and 0 <= r["falls"] <= 4
         assert r["ci_low"] <= r["success_rate"] <= r["ci_high"]
         assert math.isfinite(r["mean_speed_ms"]) and r["mean_speed_ms"] >= 0
     with open(paths["csv"]) as f:
         csv_rows = list(csv.DictReader(f))
-    assert tuple(csv_rows[0]) == rb.RESULT_KEYS and [int(r["episodes"]) for r in csv_rows] == [4, 4]
+    assert tuple(csv_rows[0]) == results.RESULT_KEYS and [int(r["episodes"]) for r in csv_rows] == [4, 4]
     with open(paths["png"], "rb") as f:
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
-    assert "mock_ideal" in rb.format_table(rows)
+    assert "mock_ideal" in results.format_table(rows)
 
 
 def _save_checkpoint(run_dir, params, normalizer):
@@ -201,8 +202,8 @@ def test_checkpoint_layout_mismatch_and_roundtrip(tmp_path):
     from foottof.ppo.networks import make_networks
 
     cfg = tiny_cfg()
-    c, _ = rb.eval_config(cfg, "none", 0.0)
-    env = make_env(c, source="tof", terrain_map=rb.eval_terrain_map(c, jax.random.PRNGKey(0)))
+    c, _ = harness.eval_config(cfg, "none", 0.0)
+    env = make_env(c, source="tof", terrain_map=harness.eval_terrain_map(c, jax.random.PRNGKey(0)))
     sizes = env.observation_size  # eval_shape, no compile
     obs = {k: jp.zeros((1, n)) for k, n in sizes.items()}
     nets = make_networks(env.action_size, c.network)
@@ -212,19 +213,19 @@ def test_checkpoint_layout_mismatch_and_roundtrip(tmp_path):
     _save_checkpoint(str(tmp_path / "other"), nets.init_params(key, other),
                      nets.init_normalizer(other))
     with pytest.raises(ValueError, match=rf"observation sizes .*{sizes['state']}.*checkpoint"):
-        rb.load_policy(c, env, obs, str(tmp_path / "other"), key)
+        harness.load_policy(c, env, obs, str(tmp_path / "other"), key)
     with pytest.raises(FileNotFoundError, match="does not exist"):
-        rb.load_policy(c, env, obs, str(tmp_path / "nowhere"), key)
+        harness.load_policy(c, env, obs, str(tmp_path / "nowhere"), key)
     # Matching layout: restored values equal the saved ones.
     params = nets.init_params(jax.random.PRNGKey(7), obs)
     _save_checkpoint(str(tmp_path / "same"), params, nets.init_normalizer(obs))
-    _, restored, _ = rb.load_policy(c, env, obs, str(tmp_path / "same"), key)
+    _, restored, _ = harness.load_policy(c, env, obs, str(tmp_path / "same"), key)
     for a, b in zip(jax.tree.leaves(params), jax.tree.leaves(restored), strict=True):
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
-    assert rb.find_checkpoint(str(tmp_path)) is None  # no runs/ there
+    assert run_dir.find_checkpoint(str(tmp_path)) is None  # no runs/ there
     os.makedirs(tmp_path / "runs")
     os.rename(tmp_path / "same", tmp_path / "runs" / "same")
-    assert rb.find_checkpoint(str(tmp_path)) == str(tmp_path / "runs" / "same")
+    assert run_dir.find_checkpoint(str(tmp_path)) == str(tmp_path / "runs" / "same")
 
 
 @pytest.mark.slow

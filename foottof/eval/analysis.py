@@ -9,8 +9,8 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from foottof.envs import make_env
-from foottof.eval import robustness as rb
+from foottof.eval.harness import make_eval_env_and_policy
+from foottof.eval.results import write_atomic
 from foottof.robot import kinematics
 from foottof.sensors import tof
 
@@ -19,8 +19,8 @@ def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
                    perturbation: str = "none", level: float = 0.0):
     """Runs one evaluation episode (deterministic policy) and records it.
 
-    The env is the robustness test ensemble (``rb.eval_config`` / ``rb.eval_terrain_map``) with
-    one perturbation cell applied (default none).
+    The env and policy come from ``harness.make_eval_env_and_policy`` (the robustness test
+    ensemble with one perturbation cell applied, default none).
 
     Args:
       cfg: full config.
@@ -39,12 +39,13 @@ def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
       plus ``success`` / ``failed`` (bool, the episode's outcome if it ended within T steps),
       ``dt`` [s] and ``source``.
     """
-    c, shank = rb.eval_config(cfg, perturbation, level)
     key_map, key_init, key_run = jax.random.split(key, 3)
-    env = make_env(c, source=source, terrain_map=rb.eval_terrain_map(c, key_map), shank_scale=shank)
+    env, networks, params, normalizer = make_eval_env_and_policy(
+        cfg, source, checkpoint, key_map, key_init, perturbation, level
+    )
+    shank = env.shank_scale
     reset, step = jax.jit(jax.vmap(env.reset)), jax.vmap(env.step)
     state = reset(key_init[None])
-    networks, params, normalizer = rb.load_policy(c, env, state.obs, checkpoint, key_init)
     act = networks.policy_fn(params, normalizer, deterministic=True)
     nf, nz = env.sensing.num_sensors, env.sensing.num_zones
 
@@ -158,7 +159,7 @@ def write_analysis(env, trace: dict, out_dir: str, tag: str, video_format: str =
         os.path.join(out_dir, f"analysis_{tag}.png"): plots.analysis_png(trace, trace["dt"]),
         os.path.join(out_dir, f"episode_{tag}.npz"): buf.getvalue(),
     }
-    rb.write_atomic(files)
+    write_atomic(files)
     written = list(files)
     if frames is not None:
         path = os.path.join(out_dir, f"rollout_{tag}.{video_format}")

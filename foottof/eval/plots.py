@@ -38,7 +38,7 @@ def robustness_png(rows: list[dict]) -> bytes:
     """Success rate vs. perturbation level, one panel per perturbation, one line per source.
 
     Args:
-      rows: result rows (keys of foottof.eval.robustness.RESULT_KEYS); 'none' rows are ignored.
+      rows: result rows (keys of foottof.eval.results.RESULT_KEYS); 'none' rows are ignored.
         Error bars are the 95 % Wilson intervals; sources are drawn 1 % of the level span apart
         so that equal rates stay visible. A panel without rows says so.
     """

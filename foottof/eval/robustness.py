@@ -16,23 +16,16 @@ shank_length level needs its own physics model, hence its own compile):
 
 from __future__ import annotations
 
-import copy
-import csv
-import glob
-import io
-import json
 import math
-import os
 
 import jax
 import jax.numpy as jp
 import ml_collections
 import numpy as np
 
-from foottof.envs import make_env
+from foottof.eval.harness import make_eval_env_and_policy
+from foottof.eval.results import summarize
 from foottof.perception import check_source
-from foottof.ppo.checkpoint import load_params_and_normalizer
-from foottof.ppo.networks import make_networks
 
 PERTURBATIONS = ("none", "joint_offset", "shank_length", "odometry")
 LEVEL_RANGES = {  # valid closed range of the levels of each perturbation
@@ -43,46 +36,10 @@ LEVEL_RANGES = {  # valid closed range of the levels of each perturbation
 }
 TRACED_PERTURBATIONS = ("joint_offset", "odometry")  # levels are rollout arguments (one compile)
 LEVEL_UNITS = {"none": "-", "joint_offset": "rad", "shank_length": "scale", "odometry": "x100%"}
-PANEL_TITLES = {
-    "joint_offset": "A  joint offset [rad]",
-    "shank_length": "B  shank length [scale]",
-    "odometry": "C  odometry noise [x 100 %]",
-}
-SCHEMA_VERSION = 1
-RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
-    "source",
-    "perturbation",
-    "level",
-    "episodes",
-    "successes",
-    "success_rate",
-    "ci_low",
-    "ci_high",
-    "mean_speed_ms",
-    "falls",
-)
-TOP_KEYS = ("schema_version", "checkpoint", "episode_length_s", "results")
-SHIPPED_POLICY_DIRS = ("policies/latest",)  # checked (relative to the repo root) before runs/
 
 
 # ---------------------------------------------------------------------------------------------
 # Pure helpers (NumPy, no env)
-def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
-    """Wilson score interval of a binomial proportion (95 % for the default z).
-
-    Returns (low, high) in [0, 1]; (0, 1) for n = 0.
-    """
-    if n < 0 or successes < 0 or successes > n:
-        raise ValueError(f"successes={successes}, n={n}: need 0 <= successes <= n")
-    if n == 0:
-        return 0.0, 1.0
-    p = successes / n
-    denom = 1.0 + z * z / n
-    centre = (p + z * z / (2 * n)) / denom
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / denom
-    return max(0.0, centre - half), min(1.0, centre + half)
-
-
 def first_episode_outcomes(
     done: np.ndarray, success: np.ndarray, failed: np.ndarray, speed: np.ndarray
 ) -> dict:
@@ -117,25 +74,6 @@ def first_episode_outcomes(
         "failed": fail,
         "mean_speed_ms": mean_speed,
         "length": length,
-    }
-
-
-def summarize(source: str, perturbation: str, level: float, outcomes: dict) -> dict:
-    """One result row (keys RESULT_KEYS) from concatenated first-episode outcomes."""
-    n = int(outcomes["success"].shape[0])
-    k = int(outcomes["success"].sum())
-    lo, hi = wilson_interval(k, n)
-    return {
-        "source": source,
-        "perturbation": perturbation,
-        "level": float(level),
-        "episodes": n,
-        "successes": k,
-        "success_rate": k / n if n else float("nan"),
-        "ci_low": lo,
-        "ci_high": hi,
-        "mean_speed_ms": float(np.mean(outcomes["mean_speed_ms"])) if n else float("nan"),
-        "falls": int(outcomes["failed"].sum()),
     }
 
 
@@ -181,120 +119,7 @@ def default_levels(eval_cfg: ml_collections.ConfigDict, perturbation: str) -> tu
 
 
 # ---------------------------------------------------------------------------------------------
-# Config / env / policy
-def eval_config(cfg: ml_collections.ConfigDict, perturbation: str, level: float):
-    """Copy of `cfg` for one evaluation cell: DR off, the perturbation applied.
-
-    Returns (cfg, shank_scale) -- the shank scale is an env constructor argument.
-    """
-    c = copy.deepcopy(cfg)
-    with c.unlocked():
-        c.env.randomization.enabled = False  # no DR, no pushes
-        c.env.randomization.joint_offset_rad = 0.0
-        c.env.randomization.odometry_level = 1.0  # the paper's nominal 100 %
-        c.terrain.init_level_max = int(c.eval.num_levels) - 1  # spawn on every row
-        shank = 1.0
-        if perturbation == "joint_offset":
-            c.env.randomization.joint_offset_rad = float(level)
-        elif perturbation == "odometry":
-            c.env.randomization.odometry_level = float(level)
-        elif perturbation == "shank_length":
-            shank = float(level)
-    return c, shank
-
-
-def eval_terrain_map(cfg: ml_collections.ConfigDict, key: jax.Array):
-    """The test ensemble: eval.stone_fraction stepping stones (equal split), the rest gaps."""
-    from foottof.terrain.terrain_map import build_terrain_map, make_eval_map_spec
-
-    e = cfg.eval
-    stones, gaps = tuple(e.stone_types), tuple(e.gap_types)
-    frac = float(e.stone_fraction)
-    if not 0.0 <= frac <= 1.0:
-        raise ValueError(f"eval.stone_fraction={frac} outside the valid range [0, 1]")
-    weights = [frac / len(stones)] * len(stones) + [(1 - frac) / len(gaps)] * len(gaps)
-    spec = make_eval_map_spec(
-        cfg.terrain,
-        stones + gaps,
-        weights,
-        progress=float(e.difficulty_fraction),
-        num_levels=int(e.num_levels),
-        num_cols=int(e.num_cols),
-    )
-    return build_terrain_map(key, spec)
-
-
-def find_checkpoint(repo_root: str) -> str | None:
-    """Default checkpoint: a shipped policy (policies/latest), else the newest run under runs/."""
-    for rel in SHIPPED_POLICY_DIRS:
-        path = os.path.join(repo_root, rel)
-        if _has_checkpoint(path):
-            return path
-    runs = [d for d in glob.glob(os.path.join(repo_root, "runs", "*")) if _has_checkpoint(d)]
-    if not runs:
-        return None
-    return max(runs, key=lambda d: os.path.getmtime(os.path.join(d, "checkpoints")))
-
-
-def _has_checkpoint(path: str) -> bool:
-    ck = os.path.join(path, "checkpoints")
-    return os.path.isdir(ck) and any(n.isdigit() for n in os.listdir(ck))
-
-
-def run_config_path(checkpoint: str) -> str | None:
-    """config.json of the run holding `checkpoint` (run dir, checkpoints/ or a step dir)."""
-    p = os.path.abspath(checkpoint)
-    for _ in range(3):
-        if os.path.isfile(os.path.join(p, "config.json")):
-            return os.path.join(p, "config.json")
-        p = os.path.dirname(p)
-    return None
-
-
-def with_run_network(cfg: ml_collections.ConfigDict, checkpoint: str | None):
-    """`cfg` with c.network taken from the checkpoint's run config (if it has one)."""
-    path = run_config_path(checkpoint) if checkpoint else None
-    if path is None:
-        return cfg
-    with open(path) as f:
-        saved = json.load(f)
-    if "network" not in saved:
-        return cfg
-    c = copy.deepcopy(cfg)
-    with c.unlocked():
-        for k, v in saved["network"].items():
-            if k in c.network:
-                c.network[k] = tuple(v) if isinstance(v, list) else v
-    return c
-
-
-def load_policy(cfg, env, obs, checkpoint: str | None, key: jax.Array):
-    """(networks, params, normalizer): fresh init if `checkpoint` is None, else restored.
-
-    Raises:
-      FileNotFoundError: no checkpoint at `checkpoint`.
-      ValueError: the checkpoint's network / observation layout differs from this env's.
-    """
-    networks = make_networks(env.action_size, cfg.network)
-    params = networks.init_params(key, obs)
-    normalizer = jax.tree.map(jp.asarray, networks.init_normalizer(obs))  # python floats -> arrays
-    if checkpoint is None:
-        return networks, params, normalizer
-    if not os.path.exists(checkpoint):
-        raise FileNotFoundError(f"checkpoint {checkpoint!r} does not exist")
-    try:
-        params, normalizer = load_params_and_normalizer(checkpoint, params, normalizer)
-    except FileNotFoundError as e:
-        raise FileNotFoundError(f"checkpoint {checkpoint!r}: {e}") from None
-    except ValueError as e:
-        sizes = {k: int(v.shape[-1]) for k, v in obs.items()}
-        raise ValueError(
-            f"checkpoint {checkpoint!r} does not fit this env (source={env.source!r}, "
-            f"observation sizes {sizes}): {e}"
-        ) from None
-    return networks, params, normalizer
-
-
+# Rollout and sweeps
 def make_rollout(env, networks, num_envs: int, steps: int, perturbation: str = "none"):
     """jit-ed (params, normalizer, key, level) -> per-step (T, B) arrays done/success/failed/speed.
 
@@ -378,12 +203,10 @@ def evaluate_sweep(
     groups = [levels] if traced or perturbation == "none" else [(lv,) for lv in levels]
     rows = []
     for group in groups:
-        c, shank = eval_config(cfg, "none" if traced else perturbation, group[0])
-        env = make_env(
-            c, source=source, terrain_map=eval_terrain_map(c, key_map), shank_scale=shank
+        env, networks, params, normalizer = make_eval_env_and_policy(
+            cfg, source, checkpoint, key_map, key_init, "none" if traced else perturbation,
+            group[0],
         )
-        obs = jax.jit(jax.vmap(env.reset))(jax.random.split(key_init, num_envs)).obs
-        networks, params, normalizer = load_policy(c, env, obs, checkpoint, key_init)
         rollout = make_rollout(env, networks, num_envs, env.episode_steps, perturbation)
         for level in group:
             parts, collected, k_run = [], 0, key_run
@@ -401,108 +224,39 @@ def evaluate_sweep(
     return rows
 
 
-def evaluate_cell(
-    cfg: ml_collections.ConfigDict,
-    source: str,
-    perturbation: str,
-    level: float,
-    checkpoint: str | None,
-    key: jax.Array,
-    progress=None,
-) -> dict:
-    """One (source, perturbation, level) cell: ``evaluate_sweep`` with a single level."""
-    return evaluate_sweep(cfg, source, perturbation, (level,), checkpoint, key, progress)[0]
+def sweep_plan(
+    eval_cfg: ml_collections.ConfigDict, sources, perturbation: str, levels=None
+) -> list[tuple[str, str, tuple[float, ...]]]:
+    """The sweeps to run: (source, perturbation, levels), validated, before anything compiles.
+
+    Args:
+      eval_cfg: c.eval (the default levels of each sweep).
+      sources: sources to run (foottof.perception.check_source of the --source flag).
+      perturbation: one of PERTURBATIONS, or 'all' (every sweep with its c.eval levels).
+      levels: the --levels flag (None or empty: the c.eval levels).
+    """
+    if perturbation == "all":
+        if levels:
+            raise ValueError("--levels cannot be given with --perturbation all (each sweep "
+                             "uses its c.eval levels)")
+        perts = PERTURBATIONS[1:]
+    else:
+        if levels and perturbation == "none":
+            raise ValueError(f"--levels {levels} given with --perturbation none")
+        perts = (perturbation,)
+    plan = []
+    for p in perts:
+        given = levels or (default_levels(eval_cfg, p) if p in PERTURBATIONS else ())
+        plan.append((p, check_levels(p, given)))
+    return [(s, p, lv) for s in sources for p, lv in plan]
 
 
-# ---------------------------------------------------------------------------------------------
-# Output
-def results_document(rows: list[dict], checkpoint: str | None, episode_length_s: float) -> dict:
-    """The results JSON document (keys TOP_KEYS; each row keys RESULT_KEYS)."""
-    for r in rows:
-        if tuple(r) != RESULT_KEYS:
-            raise ValueError(f"result row keys {tuple(r)} differ from {RESULT_KEYS}")
-    return {
-        "schema_version": SCHEMA_VERSION,
-        "checkpoint": checkpoint or "untrained (fresh init)",
-        "episode_length_s": float(episode_length_s),
-        "results": rows,
-    }
-
-
-def csv_text(rows: list[dict]) -> str:
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=RESULT_KEYS, lineterminator="\n")
-    w.writeheader()
-    for r in rows:
-        w.writerow(r)
-    return buf.getvalue()
-
-
-def format_table(rows: list[dict]) -> str:
-    """Human-readable table of result rows."""
-    head = (
-        f"{'source':<11}{'perturbation':<14}{'level':>7}{'episodes':>9}{'success':>9}"
-        f"{'rate':>7}  {'95% CI':<13}{'speed m/s':>10}{'falls':>7}"
-    )
-    lines = [head, "-" * len(head)]
-    for r in rows:
-        lines.append(
-            f"{r['source']:<11}{r['perturbation']:<14}{r['level']:>7.3g}{r['episodes']:>9d}"
-            f"{r['successes']:>9d}{r['success_rate']:>7.3f}  "
-            f"[{r['ci_low']:.3f},{r['ci_high']:.3f}]{r['mean_speed_ms']:>10.3f}{r['falls']:>7d}"
-        )
-    return "\n".join(lines)
-
-
-def write_atomic(files: dict[str, bytes]) -> None:
-    """Writes every {path: bytes} to path.tmp first, then renames all (no partial outputs)."""
-    tmps = []
-    try:
-        for path, data in files.items():
-            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-            tmp = path + ".tmp"
-            with open(tmp, "wb") as f:
-                f.write(data)
-            tmps.append((tmp, path))
-    except BaseException:
-        for tmp, _ in tmps:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-        raise
-    for tmp, path in tmps:
-        os.replace(tmp, path)
-
-
-def result_basename(source: str, perturbation: str) -> str:
-    return f"results_{source}_{perturbation}"
-
-
-def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) -> dict:
-    """Writes results_<source>_<perturbation>.{json,csv} and robustness.png (all results in
-    out_dir on shared axes); returns {kind: path}."""
-    from foottof.eval.plots import robustness_png
-
-    base = os.path.join(out_dir, result_basename(source_flag, perturbation))
-    paths = {"json": base + ".json", "csv": base + ".csv", "png": os.path.join(out_dir,
-                                                                                "robustness.png")}
-    others = [p for p in glob.glob(os.path.join(out_dir, "results_*.json")) if p != paths["json"]]
-    rows = list(doc["results"])
-    seen = {(r["source"], r["perturbation"], r["level"]) for r in rows}
-    for p in sorted(others, key=os.path.getmtime, reverse=True):  # newest first wins
-        try:
-            with open(p) as f:
-                more = [r for r in json.load(f)["results"] if tuple(r) == RESULT_KEYS]
-        except (OSError, ValueError, KeyError, TypeError):
-            continue  # a foreign or damaged file: not plotted
-        for r in more:
-            if (r["source"], r["perturbation"], r["level"]) not in seen:
-                seen.add((r["source"], r["perturbation"], r["level"]))
-                rows.append(r)
-    write_atomic(
-        {
-            paths["json"]: json.dumps(doc, indent=2).encode(),
-            paths["csv"]: csv_text(doc["results"]).encode(),
-            paths["png"]: robustness_png(rows),
-        }
-    )
-    return paths
+def run_sweeps(cfg, plan, checkpoint: str | None, key: jax.Array, progress=None) -> list[dict]:
+    """Result rows of every sweep of ``plan`` (sweep_plan), all with the same ``key``: every
+    cell sees the same map and draws."""
+    rows = []
+    for source, perturbation, levels in plan:
+        if progress is not None:
+            progress.set_postfix(source=source, perturbation=perturbation)
+        rows += evaluate_sweep(cfg, source, perturbation, levels, checkpoint, key, progress)
+    return rows

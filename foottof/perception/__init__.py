@@ -1,4 +1,4 @@
-"""Perception: the foot-reading sources (tof, mock_ideal, mock_aggre), their maps and odometry noise.
+"""Perception: the foot-reading sources (tof, mock_ideal, mock_aggre), their maps, odometry noise.
 
 The env runs a source every control step (``foottof.envs.sensing``); the evaluation only picks
 one. This file imports no JAX, so ``foottof.config_check`` can use ``SOURCES`` before JAX loads;

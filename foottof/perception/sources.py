@@ -1,4 +1,4 @@
-"""Mock foot readings: the ToF rays cast into the ideal scan (mock_ideal) or the map (mock_aggre)."""
+"""Mock foot readings: ToF rays cast into the ideal scan (mock_ideal) or the map (mock_aggre)."""
 
 from __future__ import annotations
 

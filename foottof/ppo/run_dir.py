@@ -1,10 +1,17 @@
-"""Run folders of train.py: a new timestamped folder per run, a link to the latest (no JAX)."""
+"""Run folders: train.py's timestamped folder per run and latest link; evaluate.py's policy lookup.
 
+Imports no JAX.
+"""
+
+import copy
+import glob
+import json
 import os
 import shutil
 import time
 
 CHECKPOINT_SUBDIR = "checkpoints"  # <run_dir>/checkpoints/<iteration>/ (foottof.ppo.checkpoint)
+SHIPPED_POLICY_DIRS = ("policies/latest",)  # checked (relative to the repo root) before runs/
 
 
 def has_checkpoint(run_dir: str) -> bool:
@@ -101,3 +108,64 @@ def forget_run(link: str, previous: str | None, created_dir: str | None) -> None
         point_latest(link, os.path.join(os.path.dirname(link), previous))
     if created_dir is not None:
         shutil.rmtree(created_dir, ignore_errors=True)
+
+
+def find_checkpoint(repo_root: str) -> str | None:
+    """Default checkpoint: a shipped policy (policies/latest), else the newest run under runs/."""
+    for rel in SHIPPED_POLICY_DIRS:
+        path = os.path.join(repo_root, rel)
+        if has_checkpoint(path):
+            return path
+    runs = [d for d in glob.glob(os.path.join(repo_root, "runs", "*")) if has_checkpoint(d)]
+    if not runs:
+        return None
+    return max(runs, key=lambda d: os.path.getmtime(os.path.join(d, CHECKPOINT_SUBDIR)))
+
+
+def resolve_checkpoint(checkpoint: str | None, untrained: bool, repo_root: str) -> str | None:
+    """The policy evaluate.py runs: --checkpoint, else find_checkpoint; None = --untrained.
+
+    Raises:
+      FileNotFoundError: --checkpoint does not exist, or no policy was found (says what to do).
+    """
+    if untrained:
+        return None
+    if checkpoint:
+        if not os.path.exists(checkpoint):
+            raise FileNotFoundError(f"--checkpoint {checkpoint!r} does not exist")
+        return checkpoint
+    found = find_checkpoint(repo_root)
+    if found is None:
+        raise FileNotFoundError(
+            "no policy found (looked in policies/latest and runs/*/checkpoints): train first "
+            "(`make demo` on a CPU, python train.py --config configs/stage1.py on a GPU), pass "
+            "--checkpoint PATH, or --untrained to check the pipeline with a fresh policy"
+        )
+    return found
+
+
+def run_config_path(checkpoint: str) -> str | None:
+    """config.json of the run holding `checkpoint` (run dir, checkpoints/ or a step dir)."""
+    p = os.path.abspath(checkpoint)
+    for _ in range(3):
+        if os.path.isfile(os.path.join(p, "config.json")):
+            return os.path.join(p, "config.json")
+        p = os.path.dirname(p)
+    return None
+
+
+def with_run_network(cfg, checkpoint: str | None):
+    """`cfg` (a ConfigDict) with c.network from the checkpoint's run config (if it has one)."""
+    path = run_config_path(checkpoint) if checkpoint else None
+    if path is None:
+        return cfg
+    with open(path) as f:
+        saved = json.load(f)
+    if "network" not in saved:
+        return cfg
+    c = copy.deepcopy(cfg)
+    with c.unlocked():
+        for k, v in saved["network"].items():
+            if k in c.network:
+                c.network[k] = tuple(v) if isinstance(v, list) else v
+    return c

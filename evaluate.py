@@ -2,6 +2,7 @@
 
   python evaluate.py --source mock_aggre [--perturbation odometry] [--levels 0,1,2,4]
                      [--episodes 1000] [--checkpoint PATH] [--out DIR] [--config configs/...]
+  python evaluate.py --source mock_aggre     # its default sweep: odometry (the paper's panel C)
   python evaluate.py --source all --perturbation joint_offset     # every source
   python evaluate.py --source all --perturbation all              # the whole robustness figure
   python evaluate.py --analyze --source tof --out DIR             # one episode: PNG, MP4, .npz
@@ -19,7 +20,10 @@ from ml_collections import config_flags
 _CONFIG = config_flags.DEFINE_config_file("config", "configs/base.py", "Config file (configs/*.py).")
 _SOURCE = flags.DEFINE_string("source", "tof", "tof | mock_ideal | mock_aggre | all.")
 _PERT = flags.DEFINE_string(
-    "perturbation", "none", "none | joint_offset | shank_length | odometry | all (the 3 sweeps)."
+    "perturbation", None,
+    "none | joint_offset | shank_length | odometry | all (the 3 sweeps). Default: each source's "
+    "sweep in the paper's robustness figure: tof -> joint_offset, mock_ideal -> joint_offset, "
+    "mock_aggre -> odometry (robustness.HEADLINE_SWEEPS); none with --analyze / --export.",
 )
 _LEVELS = flags.DEFINE_list("levels", None, "Perturbation levels (default: the c.eval sweep).")
 _EPISODES = flags.DEFINE_integer("episodes", None, "Episodes per cell (default c.eval.episodes).")
@@ -95,7 +99,7 @@ def main(argv):
     out = _OUT.value or cfg.eval.out_dir
     try:
         sources = check_source(_SOURCE.value)
-        pert = _PERT.value
+        pert = _PERT.value or ("none" if _ANALYZE.value or _EXPORT.value else None)
         plan = rb.sweep_plan(cfg.eval, sources, pert, _LEVELS.value)
         if _EPISODES.value is not None:
             if _EPISODES.value < 1:
@@ -116,12 +120,12 @@ def main(argv):
         total = sum(len(levels) for _, _, levels in plan) * int(cfg.eval.episodes)
         with tqdm(total=total, unit="ep", desc="evaluate") as bar:
             rows = rb.run_sweeps(cfg, plan, ckpt, key, bar)
-        doc = results.results_document(rows, ckpt, float(cfg.env.episode_length_s))
-        paths = results.write_results(out, _SOURCE.value, pert, doc)
+        paths = results.write_run(out, _SOURCE.value, pert, rows, ckpt,
+                                  float(cfg.env.episode_length_s))
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")
     print(results.format_table(rows))
-    print("[evaluate] wrote " + ", ".join(paths.values()))
+    print("[evaluate] wrote " + ", ".join(paths))
 
 
 if __name__ == "__main__":

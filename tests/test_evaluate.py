@@ -113,6 +113,19 @@ def test_robustness_png_panels_without_data():
     assert png != plots.robustness_png([])
 
 
+def test_default_sweep_is_the_sources_headline_sweep():
+    e = tiny_cfg().eval
+    odo, joint = tuple(e.odometry_levels), tuple(e.joint_offset_levels)
+    assert rb.sweep_plan(e, ("mock_aggre",), None) == [("mock_aggre", "odometry", odo)]
+    assert rb.sweep_plan(e, check_source("all"), None) == [
+        ("tof", "joint_offset", joint), ("mock_ideal", "joint_offset", joint),
+        ("mock_aggre", "odometry", odo)]
+    assert rb.sweep_plan(e, ("tof",), None, ["0", "0.2"]) == [("tof", "joint_offset", (0.0, 0.2))]
+    with pytest.raises(ValueError, match="needs --perturbation"):
+        rb.sweep_plan(e, check_source("all"), None, ["1"])
+    assert rb.sweep_plan(e, ("tof",), "none") == [("tof", "none", (0.0,))]
+
+
 def test_write_atomic_leaves_nothing_on_error(tmp_path):
     good = str(tmp_path / "a.json")
     bad = str(tmp_path / "missing_dir_is_a_file" / "b.csv")

@@ -16,6 +16,7 @@ PANELS = (
     ("shank_length", "B  shank length", "shank length scale [-]"),
     ("odometry", "C  odometry noise", "odometry noise [x 100 %]"),
 )
+FILL_COMMAND = "python evaluate.py --source all --perturbation {}"  # fills a missing panel
 
 
 def _figure(*args, **kwargs):
@@ -40,21 +41,31 @@ def robustness_png(rows: list[dict]) -> bytes:
     Args:
       rows: result rows (keys of foottof.eval.results.RESULT_KEYS); 'none' rows are ignored.
         Error bars are the 95 % Wilson intervals; sources are drawn 1 % of the level span apart
-        so that equal rates stay visible. A panel without rows says so.
+        so that equal rates stay visible. Only panels with rows are drawn; a line under them
+        names the command that fills each missing one (all three missing: that line alone).
     """
-    plt, (fig, axes) = _figure(1, 3, figsize=(13, 3.8), sharey=True)
+    full = [(p, t, x) for p, t, x in PANELS if any(r["perturbation"] == p for r in rows)]
+    missing = [(p, t) for p, t, _ in PANELS if p not in {q for q, _, _ in full}]
+    note = "not run yet: " + "; ".join(
+        f"{t.split(maxsplit=1)[1]} ({FILL_COMMAND.format(p)})" for p, t in missing
+    )
+    if not full:
+        plt, (fig, ax) = _figure(1, 1, figsize=(9, 2.5))
+        ax.axis("off")
+        ax.text(0.5, 0.5, "no perturbation sweep in this folder\n" + note.replace("; ", "\n"),
+                ha="center", va="center", transform=ax.transAxes, color="0.3", fontsize=10)
+        return _png(plt, fig)
+    plt, (fig, axes) = _figure(1, len(full), figsize=(1.0 + 4.2 * len(full), 3.8), sharey=True,
+                               squeeze=False)
+    axes = axes[0]
     sources = sorted({r["source"] for r in rows})
     colours = {s: f"C{i}" for i, s in enumerate(sources)}
-    for ax, (pert, title, xlabel) in zip(axes, PANELS, strict=True):
+    for ax, (pert, title, xlabel) in zip(axes, full, strict=True):
         ax.set_title(title, loc="left")
         ax.set_xlabel(xlabel)
         ax.set_ylim(-0.02, 1.02)
         ax.grid(alpha=0.3)
         sel = [r for r in rows if r["perturbation"] == pert]
-        if not sel:
-            ax.text(0.5, 0.5, "no data", ha="center", va="center", transform=ax.transAxes,
-                    color="0.4", fontsize=12)
-            continue
         levels = sorted({r["level"] for r in sel})
         span = (levels[-1] - levels[0]) or 1.0
         for i, s in enumerate(sources):
@@ -72,6 +83,9 @@ def robustness_png(rows: list[dict]) -> bytes:
         ax.legend(fontsize=8)
     axes[0].set_ylabel("success rate")
     fig.tight_layout()
+    if missing:
+        fig.subplots_adjust(bottom=0.24)
+        fig.text(0.01, 0.01, note, fontsize=8, color="0.3", ha="left", va="bottom", wrap=True)
     return _png(plt, fig)
 
 

@@ -152,3 +152,21 @@ def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) 
         }
     )
     return paths
+
+
+def write_run(out_dir: str, source_flag: str, perturbation_flag: str | None, rows: list[dict],
+              checkpoint: str | None, episode_length_s: float) -> list[str]:
+    """Writes the rows of one evaluate.py run (write_results); returns the paths written.
+
+    One results file named by the --perturbation flag; without the flag (each source's default
+    sweep) one file per perturbation that ran, so a later explicit run of it replaces it.
+    """
+    names = [perturbation_flag] if perturbation_flag else list(
+        dict.fromkeys(r["perturbation"] for r in rows))
+    paths = []
+    for name in names:
+        sel = rows if perturbation_flag else [r for r in rows if r["perturbation"] == name]
+        doc = results_document(sel, checkpoint, episode_length_s)
+        written = write_results(out_dir, source_flag, name, doc).values()
+        paths += [p for p in written if p not in paths]
+    return paths

@@ -34,6 +34,9 @@ LEVEL_RANGES = {  # valid closed range of the levels of each perturbation
     "shank_length": (0.8, 1.2),
     "odometry": (0.0, 10.0),
 }
+# Each source's sweep when no perturbation is asked for: the one it is compared on in the paper's
+# robustness figure (A: joint offset, tof vs mock_ideal; C: odometry, tof vs mock_aggre).
+HEADLINE_SWEEPS = {"tof": "joint_offset", "mock_ideal": "joint_offset", "mock_aggre": "odometry"}
 TRACED_PERTURBATIONS = ("joint_offset", "odometry")  # levels are rollout arguments (one compile)
 LEVEL_UNITS = {"none": "-", "joint_offset": "rad", "shank_length": "scale", "odometry": "x100%"}
 
@@ -225,30 +228,35 @@ def evaluate_sweep(
 
 
 def sweep_plan(
-    eval_cfg: ml_collections.ConfigDict, sources, perturbation: str, levels=None
+    eval_cfg: ml_collections.ConfigDict, sources, perturbation: str | None, levels=None
 ) -> list[tuple[str, str, tuple[float, ...]]]:
     """The sweeps to run: (source, perturbation, levels), validated, before anything compiles.
 
     Args:
       eval_cfg: c.eval (the default levels of each sweep).
       sources: sources to run (foottof.perception.check_source of the --source flag).
-      perturbation: one of PERTURBATIONS, or 'all' (every sweep with its c.eval levels).
+      perturbation: one of PERTURBATIONS; 'all' (every sweep with its c.eval levels); None
+        (each source's HEADLINE_SWEEPS sweep).
       levels: the --levels flag (None or empty: the c.eval levels).
     """
-    if perturbation == "all":
-        if levels:
-            raise ValueError("--levels cannot be given with --perturbation all (each sweep "
-                             "uses its c.eval levels)")
-        perts = PERTURBATIONS[1:]
-    else:
-        if levels and perturbation == "none":
-            raise ValueError(f"--levels {levels} given with --perturbation none")
-        perts = (perturbation,)
+    if perturbation == "all" and levels:
+        raise ValueError("--levels cannot be given with --perturbation all (each sweep "
+                         "uses its c.eval levels)")
+    if perturbation == "none" and levels:
+        raise ValueError(f"--levels {levels} given with --perturbation none")
+    if perturbation is None and levels and len({HEADLINE_SWEEPS[s] for s in sources}) > 1:
+        raise ValueError(f"--levels {levels} needs --perturbation here: the default sweeps of "
+                         f"{list(sources)} differ ({HEADLINE_SWEEPS})")
     plan = []
-    for p in perts:
-        given = levels or (default_levels(eval_cfg, p) if p in PERTURBATIONS else ())
-        plan.append((p, check_levels(p, given)))
-    return [(s, p, lv) for s in sources for p, lv in plan]
+    for s in sources:
+        if perturbation is None:
+            perts = (HEADLINE_SWEEPS[s],)
+        else:
+            perts = PERTURBATIONS[1:] if perturbation == "all" else (perturbation,)
+        for p in perts:
+            given = levels or (default_levels(eval_cfg, p) if p in PERTURBATIONS else ())
+            plan.append((s, p, check_levels(p, given)))
+    return plan
 
 
 def run_sweeps(cfg, plan, checkpoint: str | None, key: jax.Array, progress=None) -> list[dict]:

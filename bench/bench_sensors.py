@@ -59,8 +59,9 @@ def bench(n: int, args) -> None:
     mx = mjx.put_model(m)
     ids = sensors.site_ids(m, constants.TOF_SITES)
     noise_cfg = _sensor.get_noise_section()
-    spec = sensors.make_spec(_sensor.get_section(), noise_cfg)
-    bounds = sensors.bounds_from_config(noise_cfg, 2, spec)
+    spec = sensors.make_spec(_sensor.get_section())
+    tspec = sensors.make_timing_spec(spec, noise_cfg)
+    bounds = sensors.bounds_from_config(noise_cfg, 2, tspec)
     noise = sensors.load_model()
 
     key_xy, key_run, key_tof = jax.random.split(jax.random.PRNGKey(0), 3)
@@ -90,7 +91,7 @@ def bench(n: int, args) -> None:
     def tof(d, st, keys):  # sensing + timing/degradation, repeated `steps` times (same poses)
         def one_env(d, st, key):
             def body(st, k):
-                st, obs = sensors.step(spec, noise, st, read(d), k)
+                st, obs = sensors.step(tspec, noise, st, read(d), k)
                 return st, obs.distance_m.sum()
 
             return jax.lax.scan(body, st, jax.random.split(key, steps))
@@ -98,7 +99,7 @@ def bench(n: int, args) -> None:
         return jax.vmap(one_env)(d, st, keys)
 
     keys = jax.random.split(key_run, n)
-    st0 = jax.jit(jax.vmap(lambda d, k: sensors.reset(spec, bounds, noise, k, read(d))[0]))(
+    st0 = jax.jit(jax.vmap(lambda d, k: sensors.reset(tspec, bounds, noise, k, read(d))[0]))(
         d0, jax.random.split(key_tof, n)
     )
     d1, c_phys, t_phys = _time(jax.jit(physics), d0, keys, reps=args.reps)

@@ -12,6 +12,7 @@ import pytest
 from configs import _sensor
 from foottof.sensors import (
     MISS,
+    TimingSpec,
     ToFReading,
     ToFSpec,
     bounds_from_config,
@@ -19,6 +20,7 @@ from foottof.sensors import (
     degrade,
     init,
     make_spec,
+    make_timing_spec,
     ray_heightfield,
     ray_heightfield_normal,
     reset,
@@ -360,13 +362,12 @@ def _run(spec, bounds, phase, n_steps, key=0):
 
 @pytest.mark.parametrize("k", [0, 1, 3])
 def test_delay_returns_reading_k_steps_earlier(k):
-    spec = ToFSpec(
+    spec = TimingSpec(ToFSpec(
         num_sensors=2,
         rate_hz=50.0,
         tilt_deg=((0.0, 0.0),) * 2,
         offset_m=((0.0, 0.0, 0.0),) * 2,
-        delay_capacity_steps=4,
-    )
+    ), delay_capacity_steps=4)
     d, age, delay = _run(spec, _zero_bounds(k, k), [0.0, 0.0], 12)
     assert delay == k
     for n in range(13):  # frames at every control step (50 Hz, phase 0): value of step n - k
@@ -376,7 +377,7 @@ def test_delay_returns_reading_k_steps_earlier(k):
 
 
 def test_delay_draw_and_capacity():
-    spec = ToFSpec(delay_capacity_steps=4)
+    spec = TimingSpec(ToFSpec(), delay_capacity_steps=4)
     bounds = _zero_bounds(1, 4)
     keys = jax.random.split(jax.random.PRNGKey(0), 256)
     rd = _reading(np.zeros((4, 16)))
@@ -396,14 +397,13 @@ def test_delay_draw_and_capacity():
 
 def test_sample_and_hold_ages_60hz_and_15hz():
     for grid, rate in ((4, 60.0), (8, 15.0)):
-        spec = ToFSpec(
+        spec = TimingSpec(ToFSpec(
             num_sensors=2,
             grid=grid,
             rate_hz=rate,
             tilt_deg=((0.0, 0.0),) * 2,
             offset_m=((0.0, 0.0, 0.0),) * 2,
-            delay_capacity_steps=0,
-        )
+        ), delay_capacity_steps=0)
         phase = np.array([0.3, 0.7]) / rate  # no completion exactly between two steps
         d, age, _ = _run(spec, _zero_bounds(0, 0), phase, 30)
         period = 1 / rate
@@ -559,15 +559,16 @@ def test_config_sections_build_spec_and_bounds():
     cfg = ml_collections.ConfigDict(
         {"sensor": _sensor.get_section(), "noise": _sensor.get_noise_section()}
     )
-    spec = make_spec(cfg.sensor, cfg.noise)
-    assert (spec.num_sensors, spec.num_zones, spec.num_rays, spec.delay_capacity_steps) == (
+    spec = make_spec(cfg.sensor)
+    tspec = make_timing_spec(spec, cfg.noise)
+    assert (spec.num_sensors, spec.num_zones, spec.num_rays, tspec.delay_capacity_steps) == (
         4,
         16,
         41,
         4,
     )
-    b1, b2 = bounds_from_config(cfg.noise, 1, spec), bounds_from_config(cfg.noise, 2, spec)
+    b1, b2 = bounds_from_config(cfg.noise, 1, tspec), bounds_from_config(cfg.noise, 2, tspec)
     for f in ("offset_m", "proportional", "gaussian_m", "missing_rate", "model_scale"):
         assert float(getattr(b1, f)) < float(getattr(b2, f))
-    st = init(spec)
+    st = init(tspec)
     assert st.ring_m.shape == (5, 4, 16) and st.held_time_s.shape == (4,)

@@ -13,7 +13,7 @@ from foottof.perception import elevation_map as em
 from foottof.perception import sources as mock
 from foottof.robot import kinematics
 from foottof.sensors import degradation as deg
-from foottof.sensors import tof
+from foottof.sensors import timing, tof
 from foottof.sensors.noise_model import load_model
 
 
@@ -55,7 +55,7 @@ class Sense:
 class SensingState:
     """Per-env sensing state: the ToF timing/degradation pipeline and, for mock_aggre, the map."""
 
-    tof: deg.ToFState
+    tof: timing.ToFState
     emap: em.ElevationMapState | None = None
 
 
@@ -76,8 +76,9 @@ class Sensing:
         self.source = source
         self.hfield = hfield
         self.shank_scale = float(shank_scale)
-        self.spec = tof.make_spec(cfg.sensor, cfg.noise)
-        self.bounds = deg.bounds_from_config(cfg.noise, int(cfg.stage), self.spec)
+        self.spec = tof.make_spec(cfg.sensor)
+        self.timing = timing.make_timing_spec(self.spec, cfg.noise, constants.CONTROL_DT_S)
+        self.bounds = deg.bounds_from_config(cfg.noise, int(cfg.stage), self.timing)
         self.model = load_model(cfg.noise.model_path or None)
         sites = tuple(cfg.sensor.sites)
         bad = [s for s in sites if s not in constants.TOF_SITES]
@@ -112,7 +113,7 @@ class Sensing:
             )
         return mock.mock_aggre_readings(self.spec, emap, base_quat, meas.q, self.feet)
 
-    def _sense(self, obs: deg.ToFObs, true: tof.ToFReading) -> Sense:
+    def _sense(self, obs: timing.ToFObs, true: tof.ToFReading) -> Sense:
         return Sense(
             distance=obs.distance_m,
             valid=obs.valid.astype(jp.float32),
@@ -128,7 +129,7 @@ class Sensing:
             emap = em.aggre_init(self.hfield, d.qpos[0:3], d.qpos[3:7])
         true = self.true_reading(d)
         reading = self._source_reading(d, meas, emap, true)
-        tstate, obs = deg.reset(self.spec, self.bounds, self.model, key, reading)
+        tstate, obs = timing.reset(self.timing, self.bounds, self.model, key, reading)
         return SensingState(tof=tstate, emap=emap), self._sense(obs, true)
 
     def step(self, state: SensingState, key, d, meas: Measurements, done) -> tuple[SensingState, Sense]:
@@ -146,8 +147,8 @@ class Sensing:
             )
         true = self.true_reading(d)
         reading = self._source_reading(d, meas, emap, true)
-        t_step, o_step = deg.step(self.spec, self.model, state.tof, reading, key_step)
-        t_reset, o_reset = deg.reset(self.spec, self.bounds, self.model, key_reset, reading)
+        t_step, o_step = timing.step(self.timing, self.model, state.tof, reading, key_step)
+        t_reset, o_reset = timing.reset(self.timing, self.bounds, self.model, key_reset, reading)
         sel = lambda a, b: jax.tree.map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
         return SensingState(tof=sel(t_reset, t_step), emap=emap), self._sense(
             sel(o_reset, o_step), true

@@ -3,18 +3,22 @@
 from foottof.sensors.degradation import (
     DegradationBounds,
     DegradationLevels,
-    ToFObs,
-    ToFState,
     bounds_from_config,
     degrade,
-    init,
-    reset,
     sample_levels,
-    step,
     zero_levels,
 )
 from foottof.sensors.noise_model import NoiseModel, load_model, missing_prob, noise_std
 from foottof.sensors.raycast import MISS, num_strips, ray_heightfield, ray_heightfield_normal
+from foottof.sensors.timing import (
+    TimingSpec,
+    ToFObs,
+    ToFState,
+    init,
+    make_timing_spec,
+    reset,
+    step,
+)
 from foottof.sensors.tof import (
     ToFReading,
     ToFSpec,
@@ -35,11 +39,13 @@ __all__ = [
     "ToFReading",
     "ToFSpec",
     "ToFState",
+    "TimingSpec",
     "bounds_from_config",
     "degrade",
     "init",
     "load_model",
     "make_spec",
+    "make_timing_spec",
     "missing_prob",
     "noise_std",
     "num_strips",

@@ -20,7 +20,7 @@ TILT_LIMIT_DEG = 90.0  # |extra tilt| about each site axis must stay below this
 
 @dataclasses.dataclass(frozen=True)
 class ToFSpec:
-    """Static sensor layout and timing (hashable; read from config outside jit).
+    """Static sensor geometry and frame rate (hashable; read from config outside jit).
 
     Zone layout: the FoV is split in the sensor's image plane (pinhole model: uniform in
     ``tan(angle)``, as a flat SPAD array behind a lens) into ``grid x grid`` zones. Zone index
@@ -42,8 +42,6 @@ class ToFSpec:
       rate_hz: frame rate [Hz] (<= 60 for 4x4, <= 15 for 8x8).
       tilt_deg: F pairs (tilt_x, tilt_y), extra rotation about the site x then y axis [deg].
       offset_m: F triples, sensor origin in the site frame [m].
-      delay_capacity_steps: ring-buffer capacity; the per-episode delay must not exceed it.
-      control_dt_s: policy period [s].
     """
 
     num_sensors: int = constants.NUM_FEET
@@ -54,8 +52,6 @@ class ToFSpec:
     rate_hz: float = constants.TOF_RATE_HZ
     tilt_deg: tuple = ((0.0, 0.0),) * constants.NUM_FEET
     offset_m: tuple = ((0.0, 0.0, 0.0),) * constants.NUM_FEET
-    delay_capacity_steps: int = 4
-    control_dt_s: float = constants.CONTROL_DT_S
 
     def __post_init__(self):
         if self.grid not in MAX_RATE_HZ:
@@ -90,12 +86,6 @@ class ToFSpec:
                 f"offset_m must hold num_sensors={self.num_sensors} (x, y, z) triples, got shape "
                 f"{np.shape(self.offset_m)}"
             )
-        if self.delay_capacity_steps < 0:
-            raise ValueError(
-                f"delay_capacity_steps must be >= 0, got {self.delay_capacity_steps!r}"
-            )
-        if not self.control_dt_s > 0.0:
-            raise ValueError(f"control_dt_s must be > 0, got {self.control_dt_s!r}")
 
     @property
     def num_zones(self) -> int:
@@ -159,11 +149,8 @@ class ToFSpec:
         return np.asarray(out)
 
 
-def make_spec(sensor_cfg, noise_cfg=None, control_dt_s: float = constants.CONTROL_DT_S) -> ToFSpec:
-    """ToFSpec from the ``sensor`` config section (and ``noise`` for the delay capacity).
-
-    The delay capacity is the largest ``max_delay_steps`` of ``noise.stage1``/``noise.stage2``
-    (0 without ``noise_cfg``).
+def make_spec(sensor_cfg) -> ToFSpec:
+    """ToFSpec from the ``sensor`` config section (frame timing: foottof.sensors.timing).
 
     Raises:
       ValueError: bad resolution, rate, tilt, offsets or sensor count (message names the value).
@@ -176,9 +163,6 @@ def make_spec(sensor_cfg, noise_cfg=None, control_dt_s: float = constants.CONTRO
             f"sensor.tilt_x_deg / tilt_y_deg need one value per site ({n}), got {len(tilt_x)} / "
             f"{len(tilt_y)}"
         )
-    cap = 0
-    if noise_cfg is not None:
-        cap = max(int(noise_cfg[s].max_delay_steps) for s in ("stage1", "stage2"))
     return ToFSpec(
         num_sensors=n,
         grid=int(sensor_cfg.grid),
@@ -188,8 +172,6 @@ def make_spec(sensor_cfg, noise_cfg=None, control_dt_s: float = constants.CONTRO
         rate_hz=float(sensor_cfg.rate_hz),
         tilt_deg=tuple(zip(tilt_x, tilt_y, strict=True)),
         offset_m=tuple(tuple(float(c) for c in o) for o in sensor_cfg.offset_m),
-        delay_capacity_steps=cap,
-        control_dt_s=float(control_dt_s),
     )
 
 

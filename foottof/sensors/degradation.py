@@ -2,17 +2,12 @@
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import jax
 import jax.numpy as jp
 from flax import struct
 
 from foottof.sensors.noise_model import NoiseModel, missing_prob, noise_std
 from foottof.sensors.tof import ToFReading
-
-if TYPE_CHECKING:
-    from foottof.sensors.timing import TimingSpec
 
 _FIELDS = ("offset_m", "proportional", "gaussian_m", "missing_rate", "model_scale")
 
@@ -57,10 +52,11 @@ class DegradationLevels:
     model_scale: jax.Array
 
 
-def bounds_from_config(
-    noise_cfg, stage: int, spec: TimingSpec | None = None
-) -> DegradationBounds:
+def bounds_from_config(noise_cfg, stage: int, spec=None) -> DegradationBounds:
     """DegradationBounds of ``noise.stage{stage}`` (config read outside jit, validated).
+
+    ``spec`` is the pipeline's foottof.sensors.timing.TimingSpec (its delay capacity bounds the
+    delay range), or None.
 
     Raises:
       ValueError: unknown stage, negative bounds, missing_rate > 1, or a delay range outside

@@ -1,8 +1,10 @@
-"""Benchmark: full env step (physics + sensors + obs + reward + reset) vs bare MJX physics.
+"""Benchmark: full env step (physics + sensors + obs + reward + reset) vs its bare physics step.
 
 Usage: python bench/bench_env.py [--envs 64 256 1024] [--steps 20] [--config configs/cpu.py]
+       [--physics mjx|mujoco|auto]
 Prints env-steps/s of both, their ratio, compile times and peak memory (RSS, and GPU memory
-when a GPU is present). On a GPU, run with --envs 4096 8192.
+when a GPU is present). On a GPU, run with --envs 4096 8192. Both backends side by side, with
+bare MuJoCo C and training iterations: bench/bench_backends.py.
 """
 
 import argparse
@@ -19,7 +21,6 @@ sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 from configs import load_config  # noqa: E402
 from foottof import constants  # noqa: E402
 from foottof.envs import make_env  # noqa: E402
-from foottof.robot import control  # noqa: E402
 
 
 def _timeit(fn, state, steps):
@@ -39,14 +40,19 @@ def main():
     p.add_argument("--envs", type=int, nargs="+", default=[64, 256, 1024])
     p.add_argument("--steps", type=int, default=20, help="timed control steps per size")
     p.add_argument("--config", default="configs/cpu.py")
+    p.add_argument("--physics", default="mjx", help="env.physics: mjx | mujoco | auto")
     args = p.parse_args()
     cfg = load_config(args.config)
+    cfg.env.physics = args.physics
     env = make_env(cfg)
-    mx = env.mx
     kp, kd = float(cfg.env.control.kp), float(cfg.env.control.kd)
     default_q = jp.asarray(constants.DEFAULT_POSE)
-    print(f"backend {jax.default_backend()}, map {env.hfield.shape} vertices")
-    print(f"{'envs':>6} {'env sps':>10} {'physics sps':>12} {'ratio':>6} {'compile env/phys s':>19}")
+    print(
+        f"backend {jax.default_backend()}, physics {env.backend}, map {env.hfield.shape} vertices"
+    )
+    print(
+        f"{'envs':>6} {'env sps':>10} {'physics sps':>12} {'ratio':>6} {'compile env/phys s':>19}"
+    )
     for n in args.envs:
         state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(0), n))
         action = jp.zeros((n, 12))
@@ -54,7 +60,7 @@ def main():
         c_env, t_env = _timeit(env_step, state, args.steps)
 
         def phys(d):
-            d, _ = jax.vmap(lambda d: control.control_step(mx, d, default_q, kp, kd))(d)
+            d, _ = jax.vmap(lambda d: env.physics.step(d, default_q, kp, kd, 1.0, 0.0))(d)
             return d
 
         c_phys, t_phys = _timeit(jax.jit(phys), state.pipeline_state, args.steps)

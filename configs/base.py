@@ -2,7 +2,7 @@
 
 import ml_collections
 
-from configs import _env, _eval, _ppo, _reward, _sensor, _task, _terrain
+from configs import _env, _eval, _ppo, _reward, _sensor, _terrain
 
 
 def get_config() -> ml_collections.ConfigDict:
@@ -12,7 +12,7 @@ def get_config() -> ml_collections.ConfigDict:
     c.terrain = _terrain.get_section()  # terrain map and curriculum
     c.sensor = _sensor.get_section()  # foot ToF sensor geometry and timing
     c.noise = _sensor.get_noise_section()  # sensor degradation upper bounds and delay
-    c.env = _task.add_task_fields(_env.get_section())  # robot, episode, observations, randomization
+    c.env = _env.get_section()  # robot, episode, observations, randomization
     c.reward = _reward.get_section()  # reward scales (reward.scales.<term>)
     c.ppo = _ppo.get_section()  # PPO hyper-parameters
     c.network = _ppo.get_network_section()  # LSTM actor-critic sizes

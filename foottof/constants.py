@@ -1,4 +1,4 @@
-"""Robot names, foot order and physical constants of ANYmal-D (figures: shared/reference/anymal.md)."""
+"""Robot names, foot order and physical constants of ANYmal-D (ANYmal-D public URDF, IsaacLab)."""
 
 FEET = ("LF", "RF", "LH", "RH")  # foot order used everywhere
 JOINT_KINDS = ("HAA", "HFE", "KFE")

@@ -189,7 +189,7 @@ def _run_map(hf, traj, levels, keys, see_all=False):
         return state
 
     states = jax.jit(jax.vmap(one))(levels, keys)
-    ideal = em.height_scan(hf, pos[-1], em.yaw_from_quat(quat[-1]))
+    ideal = em.height_scan(hf, pos[-1], kin.yaw_from_quat(quat[-1]))
     return states, ideal
 
 
@@ -270,7 +270,7 @@ def straight_walk():
 def test_straight_walk_by_whole_cells_remembers_exactly(straight_walk):
     """Remembered cells are shifted copies of the ideal scan (no resampling error)."""
     hf, pos, quat, state = straight_walk
-    ideal = em.height_scan(hf, pos, em.yaw_from_quat(quat))
+    ideal = em.height_scan(hf, pos, kin.yaw_from_quat(quat))
     err, count = em.memory_error(state, ideal)
     assert int(count) > 500
     assert float(err) < 1e-5
@@ -465,7 +465,7 @@ def test_mock_aggre_equals_mock_ideal_when_all_cells_in_view(stones_hf):
                                 jp.array([0.0, 0.0, 0.3]), DT, see_all=True)
     assert bool(state.scan_in_view.all())
     np.testing.assert_array_equal(state.scan, em.height_scan(stones_hf, pos[3],
-                                                             em.yaw_from_quat(quat[3])))
+                                                             kin.yaw_from_quat(quat[3])))
     a, b = _aggre_and_ideal(state, stones_hf, pos[3], quat[3], q)
     np.testing.assert_array_equal(a.valid, b.valid)
     np.testing.assert_array_equal(a.distance_m, b.distance_m)
@@ -500,7 +500,7 @@ def test_jit_equals_no_jit(stones_hf):
     tested with foottof.sensors)."""
     pos, quat, q = _poses(stones_hf, 1, 5, aligned=False)
     pos, quat, q = pos[0], quat[0], q[0]
-    yaw = em.yaw_from_quat(quat)
+    yaw = kin.yaw_from_quat(quat)
     np.testing.assert_allclose(em.height_scan(stones_hf, pos, yaw),
                                jax.jit(em.height_scan)(stones_hf, pos, yaw), atol=1e-4)
     for a, b in zip(sources.sensor_sites_in_scan_frame(quat, q),

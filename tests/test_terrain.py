@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import ndimage
 
-from configs import _terrain
+from configs import _eval, _terrain
 from foottof.terrain import (
     SPAWN_X,
     SPAWN_Y,
@@ -23,8 +23,6 @@ from foottof.terrain import (
     allocate_columns,
     build_terrain_map,
     generate_tile,
-    initial_columns,
-    initial_levels,
     make_eval_map_spec,
     progress_fraction,
     sample_spawn_goal,
@@ -477,13 +475,16 @@ def test_stage_specs_from_config():
 
 def test_eval_ensemble_spec():
     cfg = _terrain.get_section()
-    e = make_eval_map_spec(cfg, num_cols=10)
+    ev = _eval.get_section()  # the paper's ensemble: 80 % stones (3 types), 20 % gaps, 90 %
+    e = make_eval_map_spec(cfg, ev.stone_types + ev.gap_types, (0.8 / 3,) * 3 + (0.2,),
+                           ev.difficulty_fraction, ev.num_levels, num_cols=10)
     names = [TERRAIN_TYPES[t] for t in e.col_types]
     assert names.count("platform_gap") == 2 and len(names) == 10  # 20 % gaps, 80 % stones
     lo, hi = cfg.stage1_difficulty.grid_stones
     assert all(r == pytest.approx((lo + 0.9 * (hi - lo),) * 2) for r in e.col_difficulty)
     with pytest.raises(ValueError, match="'stairs'"):
-        make_eval_map_spec(cfg, types=("stairs",), weights=(1.0,))
+        make_eval_map_spec(cfg, types=("stairs",), weights=(1.0,), progress=0.9, num_levels=5,
+                           num_cols=10)
 
 
 def test_allocate_columns():
@@ -551,12 +552,7 @@ def test_update_levels_top_level_goes_random():
     assert np.all(np.abs(counts - n / num_levels) < 5 * np.sqrt(n / num_levels))  # ~ uniform
 
 
-def test_initial_levels_and_columns():
-    lv = np.asarray(initial_levels(jax.random.key(0), 1000, 10, 2))
-    assert set(lv.tolist()) == {0, 1, 2}
-    np.testing.assert_array_equal(np.asarray(initial_columns(7, 3)), [0, 1, 2, 0, 1, 2, 0])
-    with pytest.raises(ValueError, match="init_level_max=10"):
-        initial_levels(jax.random.key(0), 4, 10, 10)
+def test_update_levels_bad_fraction_raises():
     with pytest.raises(ValueError, match="down_progress_frac=1.5"):
         update_levels(
             jax.random.key(0), jp.zeros(2, int), *(jp.ones(2, bool),) * 2, jp.ones(2), 3, 1.5

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-from brax.envs.wrappers.training import VmapWrapper
-
 from foottof.envs.anymal_tof import AnymalToFEnv
 
 
@@ -14,7 +12,9 @@ def make_env(cfg, source: str | None = None, **kwargs) -> AnymalToFEnv:
 
 def make_training_env(cfg, **kwargs):
     """Batched env for the trainer: ``reset(keys (N, 2))``, ``step(state, actions (N, 12))``."""
-    return VmapWrapper(make_env(cfg, **kwargs))
+    from foottof.ppo.train import VmapEnv  # the one batching adapter (the trainer's contract)
+
+    return VmapEnv(make_env(cfg, **kwargs))
 
 
 __all__ = ["AnymalToFEnv", "make_env", "make_training_env"]

@@ -66,16 +66,6 @@ class TaskState:
     params: EpisodeParams
 
 
-def _yaw_quat(yaw):
-    return jp.stack([jp.cos(yaw / 2), 0.0 * yaw, 0.0 * yaw, jp.sin(yaw / 2)])
-
-
-def _quat_rotate_inv(quat, v):
-    """Rotate world vector(s) v (..., 3) into the frame of unit quaternion ``quat`` (w, x, y, z)."""
-    r = kinematics.quat_to_mat(quat)
-    return jp.einsum("ji,...j->...i", r, v)
-
-
 class AnymalToFEnv(Env):
     """Reach a goal across a terrain tile; Brax ``Env`` API (single env; vmap for many).
 
@@ -217,7 +207,7 @@ class AnymalToFEnv(Env):
         foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
         contact = (foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m))
         contact = contact.astype(jp.float32)
-        gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
+        gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
         failed, knee_contact = self._failed(d, gravity, fk)
         failed = failed | diverged
         truncated = (step >= self.episode_steps) & ~failed
@@ -381,7 +371,7 @@ class AnymalToFEnv(Env):
         rp = jax.random.uniform(kr, (2,), minval=-1.0, maxval=1.0) * float(
             self.cfg.env.init_roll_pitch_rad
         )
-        quat = _euler_to_quat(rp[0], rp[1], spawn[2])
+        quat = kinematics.euler_to_quat(rp[0], rp[1], spawn[2])
         z = spawn[3] + self._stand_height + float(self.cfg.env.spawn_height_offset_m)
         qpos = jp.concatenate([jp.array([spawn[0], spawn[1]]), z[None], quat, q0])
         d = self.physics.init(qpos)  # at rest
@@ -403,7 +393,7 @@ class AnymalToFEnv(Env):
         k1, k2 = jax.random.split(key)
         q = d.qpos[7:19] + p.joint_offset_rad
         q = q + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))  # ~ N(0, std^2)
-        lin_b = _quat_rotate_inv(d.qpos[3:7], d.qvel[0:3])
+        lin_b = kinematics.quat_rotate_inv(d.qpos[3:7], d.qvel[0:3])
         # odometry noise ~ U(+-0.1 level) m/s, U(+-0.2 level) rad/s per axis (paper's 100 % = 1)
         lin, ang = noisy_odometry(k2, lin_b, d.qvel[3:6], p.odometry_level)
         return sensing.Measurements(q=q, lin_vel=lin, ang_vel=ang)
@@ -426,10 +416,10 @@ class AnymalToFEnv(Env):
         base_quat = qpos[3:7]
         qd = qvel[6:18]
         qd_meas = qd + p.joint_vel_noise_rads * jax.random.normal(task.rng, (12,))
-        gravity = _quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
-        lin_b = _quat_rotate_inv(base_quat, qvel[0:3])
+        gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
+        lin_b = kinematics.quat_rotate_inv(base_quat, qvel[0:3])
         to_goal_w = jp.concatenate([task.goal - qpos[0:2], jp.zeros(1)])
-        to_goal_b = _quat_rotate_inv(base_quat, to_goal_w)[:2]
+        to_goal_b = kinematics.quat_rotate_inv(base_quat, to_goal_w)[:2]
         dist = jp.linalg.norm(to_goal_b)
         direction = to_goal_b / jp.maximum(dist, 1e-6)
         time_left = 1.0 - task.step.astype(jp.float32) / self.episode_steps
@@ -476,17 +466,3 @@ class AnymalToFEnv(Env):
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),
             "privileged_state": jp.clip(jp.nan_to_num(priv), -lim, lim),
         }
-
-
-def _euler_to_quat(roll, pitch, yaw) -> jax.Array:
-    cr, sr = jp.cos(roll / 2), jp.sin(roll / 2)
-    cp, sp = jp.cos(pitch / 2), jp.sin(pitch / 2)
-    cy, sy = jp.cos(yaw / 2), jp.sin(yaw / 2)
-    return jp.stack(
-        [
-            cr * cp * cy + sr * sp * sy,
-            sr * cp * cy - cr * sp * sy,
-            cr * sp * cy + sr * cp * sy,
-            cr * cp * sy - sr * sp * cy,
-        ]
-    )

@@ -43,10 +43,11 @@ class Camera(NamedTuple):
 
 # Intel RealSense D435 depth stream (the camera model on ANYmal-D): 87 x 58 deg field of view,
 # minimum depth ~0.3 m; 3 m is where its depth noise (~2 % of range) reaches ~6 cm, a usual clip for
-# locomotion elevation maps. Mounting poses are ANYmal-D style approximations (the public URDF S6
-# carries no camera frames): an upper and a lower camera on the front and rear faces of the base
-# box (half length 0.447 m, anymal.md §9c) and one camera on each side. With the base 0.59 m above
-# flat ground they leave a blind zone around the belly and feet of about |x| < 0.57 m, |y| < 0.46 m.
+# locomotion elevation maps. Mounting poses are ANYmal-D style approximations (the public URDF,
+# ANYbotics/anymal_d_simple_description urdf/anymal.urdf, carries no camera frames): an upper and a
+# lower camera on the front and rear faces of the base box (half length 0.447 m, the URDF's base
+# collision box) and one camera on each side. With the base 0.59 m above flat ground they leave a
+# blind zone around the belly and feet of about |x| < 0.57 m, |y| < 0.46 m.
 _D435 = dict(hfov_deg=87.0, vfov_deg=58.0, min_range_m=0.3, max_range_m=3.0)
 CAMERAS: tuple[Camera, ...] = (
     Camera("front_upper", (0.41, 0.0, 0.05), yaw_deg=0.0, pitch_down_deg=30.0, **_D435),

@@ -7,7 +7,7 @@ import jax.numpy as jp
 from flax import struct
 
 from foottof.perception import cameras as cam_lib
-from foottof.robot.kinematics import quat_to_mat
+from foottof.robot.kinematics import quat_to_mat, yaw_from_quat
 from foottof.terrain.heightfield import Heightfield
 
 # Robot-centric scan grid (paper: 5 m x 5 m at 5 cm). Frame: gravity aligned, rotated by the base
@@ -50,12 +50,6 @@ def scan_xy() -> jax.Array:
     c = jp.linspace(-SCAN_HALF_SIZE_M, SCAN_HALF_SIZE_M, SCAN_N)
     x, y = jp.meshgrid(c, c)  # x varies along columns j, y along rows i
     return jp.stack([x, y], axis=-1)
-
-
-def yaw_from_quat(quat: jax.Array) -> jax.Array:
-    """(..., 4) quaternion (w, x, y, z) -> (...,) yaw [rad] (ZYX Euler)."""
-    w, x, y, z = jp.moveaxis(quat, -1, 0)
-    return jp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def _rot_z(yaw: jax.Array) -> jax.Array:

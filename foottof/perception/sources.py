@@ -7,7 +7,7 @@ import jax.numpy as jp
 
 from foottof import constants
 from foottof.perception import elevation_map as em
-from foottof.robot.kinematics import forward_kinematics
+from foottof.robot.kinematics import forward_kinematics, yaw_from_quat
 from foottof.sensors import tof
 from foottof.terrain.heightfield import Heightfield
 
@@ -102,7 +102,7 @@ def mock_ideal_readings(
     Returns:
       ToFReading with (F, Z) arrays, same layout as the ``tof`` source.
     """
-    scan = em.height_scan(hfield, base_pos, em.yaw_from_quat(base_quat))
+    scan = em.height_scan(hfield, base_pos, yaw_from_quat(base_quat))
     return readings_from_scan(spec, scan, base_quat, q_measured, sensor_feet)
 
 

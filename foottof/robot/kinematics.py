@@ -1,4 +1,4 @@
-"""ANYmal-D leg geometry (S6, [D] columns of anymal.md) and analytic forward kinematics in JAX."""
+"""ANYmal-D leg geometry (public ANYmal-D URDF) and analytic forward kinematics in JAX."""
 
 from __future__ import annotations
 
@@ -11,8 +11,10 @@ import numpy as np
 
 from foottof import constants
 
-# Leg geometry of the LF leg in base-aligned axes at q = 0 (anymal.md §4, [D] S6) [m]. The other
-# legs mirror it: RF y -> -y, LH x -> -x, RH both (see leg_signs). Joint axes: HAA +x, HFE/KFE +y.
+# Leg geometry of the LF leg in base-aligned axes at q = 0 [m], from the ANYmal-D URDF
+# (ANYbotics/anymal_d_simple_description urdf/anymal.urdf, HEAD d5bf4dc3; fixed links merged).
+# The other legs mirror it: RF y -> -y, LH x -> -x, RH both (see leg_signs). Joint axes: HAA +x,
+# HFE/KFE +y.
 HIP_OFFSET_M = (0.304, 0.109, 0.0)  # base origin -> HAA anchor (hip body origin)
 HAA_TO_HFE_M = (0.069, 0.006, 0.0)  # HAA anchor -> HFE anchor (thigh body origin)
 HFE_TO_KFE_M = (0.0, 0.1805, -0.285)  # HFE anchor -> KFE anchor (shank body origin)
@@ -148,6 +150,33 @@ def quat_to_mat(quat: jax.Array) -> jax.Array:
         ],
         -2,
     )
+
+
+def quat_rotate_inv(quat: jax.Array, v: jax.Array) -> jax.Array:
+    """World vector(s) v (..., 3) in the frame of the unit quaternion ``quat`` (w, x, y, z)."""
+    r = quat_to_mat(quat)
+    return jp.einsum("ji,...j->...i", r, v)
+
+
+def euler_to_quat(roll, pitch, yaw) -> jax.Array:
+    """(4,) unit quaternion (w, x, y, z) of ZYX Euler angles [rad] (yaw, then pitch, then roll)."""
+    cr, sr = jp.cos(roll / 2), jp.sin(roll / 2)
+    cp, sp = jp.cos(pitch / 2), jp.sin(pitch / 2)
+    cy, sy = jp.cos(yaw / 2), jp.sin(yaw / 2)
+    return jp.stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
+
+
+def yaw_from_quat(quat: jax.Array) -> jax.Array:
+    """(..., 4) quaternion (w, x, y, z) -> (...,) yaw [rad] (ZYX Euler)."""
+    w, x, y, z = jp.moveaxis(quat, -1, 0)
+    return jp.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
 
 
 def base_to_world(pos_b: jax.Array, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:

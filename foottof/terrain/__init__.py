@@ -1,8 +1,6 @@
 """Terrain: heightfield container, tile generators, terrain map and curriculum."""
 
 from foottof.terrain.curriculum import (
-    initial_columns,
-    initial_levels,
     progress_fraction,
     update_levels,
 )
@@ -43,8 +41,6 @@ __all__ = [
     "allocate_columns",
     "build_terrain_map",
     "generate_tile",
-    "initial_columns",
-    "initial_levels",
     "make_eval_map_spec",
     "progress_fraction",
     "sample_spawn_goal",

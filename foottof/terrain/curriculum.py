@@ -11,39 +11,6 @@ def _check_levels(num_levels: int) -> None:
         raise ValueError(f"num_levels={num_levels!r} must be an integer >= 1")
 
 
-def initial_levels(
-    key: jax.Array, num_envs: int, num_levels: int, init_level_max: int
-) -> jax.Array:
-    """Initial curriculum level of each env.
-
-    Args:
-      key: PRNG key.
-      num_envs: number of envs (static).
-      num_levels: number of levels of the map (static).
-      init_level_max: largest initial level, in [0, num_levels - 1] (static).
-
-    Returns:
-      (num_envs,) int32 levels, level ~ U{0, ..., init_level_max}.
-    """
-    _check_levels(num_levels)
-    if not 0 <= init_level_max <= num_levels - 1:
-        raise ValueError(
-            f"init_level_max={init_level_max!r} outside the valid range [0, {num_levels - 1}]"
-        )
-    return jax.random.randint(key, (num_envs,), 0, init_level_max + 1, dtype=jp.int32)
-
-
-def initial_columns(num_envs: int, num_cols: int) -> jax.Array:
-    """Column (terrain type slot) of each env: env i -> i mod num_cols, spreading envs evenly.
-
-    Returns:
-      (num_envs,) int32 columns.
-    """
-    if int(num_cols) != num_cols or num_cols < 1:
-        raise ValueError(f"num_cols={num_cols!r} must be an integer >= 1")
-    return jp.arange(num_envs, dtype=jp.int32) % num_cols
-
-
 def progress_fraction(spawn_xy: jax.Array, goal_xy: jax.Array, xy: jax.Array) -> jax.Array:
     """Fraction of the spawn-to-goal distance covered: ``(|g - s| - |g - p|) / |g - s|``.
 

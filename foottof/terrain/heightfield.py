@@ -79,12 +79,6 @@ class Heightfield:
         lo, hi = self.z_floor_m, self.z_floor_m + self.z_range_m
         return self.replace(heights=jp.clip(self.heights, lo, hi))
 
-    def world_to_index(self, xy: jax.Array) -> jax.Array:
-        """(..., 2) world x, y -> (..., 2) fractional (col, row) vertex coordinates."""
-        return jp.stack(
-            [(xy[..., 0] - self.x0_m) / self.cell_m, (xy[..., 1] - self.y0_m) / self.cell_m], axis=-1
-        )
-
     def height_at(self, xy: jax.Array) -> jax.Array:
         """Height of MuJoCo's triangulated surface at world (..., 2) points [m], clamped at edges.
 
@@ -104,9 +98,6 @@ class Heightfield:
         lower = h00 + fu * (h01 - h00) + fv * (h11 - h01)
         upper = h00 + fv * (h10 - h00) + fu * (h11 - h10)
         return jp.where(fu >= fv, lower, upper)
-
-    def to_numpy(self) -> np.ndarray:
-        return np.asarray(self.heights)
 
 
 def hfield_xml(hf: Heightfield, name: str = "terrain", geom_attrs: str = "") -> tuple[str, str]:

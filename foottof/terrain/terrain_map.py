@@ -24,12 +24,6 @@ from foottof.terrain.tiles import (
 # Layout of the last axis of TerrainMap.spawn and of sample_spawn_goal's spawn.
 SPAWN_X, SPAWN_Y, SPAWN_YAW, SPAWN_Z = 0, 1, 2, 3
 
-# Evaluation ensemble of the paper: 80 % stepping stones, 20 % gaps, at 90 % of stage-1 progress.
-EVAL_TYPES = ("grid_stones", "two_row_stones", "mixed_row_stones", "platform_gap")
-EVAL_WEIGHTS = (0.8 / 3, 0.8 / 3, 0.8 / 3, 0.2)
-EVAL_PROGRESS = 0.9
-
-
 def allocate_columns(weights: Mapping[str, float], num_cols: int) -> tuple[int, ...]:
     """Splits ``num_cols`` tile columns among terrain types in proportion to ``weights``.
 
@@ -182,16 +176,16 @@ def _spread_kwargs(cfg) -> dict:
 
 def make_eval_map_spec(
     cfg,
-    types: Sequence[str] = EVAL_TYPES,
-    weights: Sequence[float] = EVAL_WEIGHTS,
-    progress: float = EVAL_PROGRESS,
-    num_levels: int = 5,
-    num_cols: int = 10,
+    types: Sequence[str],
+    weights: Sequence[float],
+    progress: float,
+    num_levels: int,
+    num_cols: int,
 ) -> TerrainMapSpec:
     """Evaluation ensemble: only ``types``, all at ``progress`` of their stage-1 difficulty range.
 
-    The default is the paper's test set: 80 % stepping-stone tiles (grid, two-row, mixed-row) and
-    20 % gap tiles at 90 % curriculum progress of stage 1; every tile of a type has the same
+    The paper's test set is set by the ``c.eval`` config section (80 % stepping-stone tiles,
+    20 % gap tiles at 90 % of stage 1); every tile of a type has the same
     difficulty (``lo + progress * (hi - lo)`` of ``cfg.stage1_difficulty``), the levels (rows) are
     just more random draws.
 

@@ -116,6 +116,19 @@ def test_reset_perturbed_replaces_only_the_perturbation(env, fns):
     assert np.abs(b[:, v0 : v0 + 3]).max() > 1e-3  # the config's noise is not zero
 
 
+def test_auto_reset_keeps_the_perturbation(env, fns):
+    """A perturbation given at reset stays with the env: the auto-reset episode has it too."""
+    _, step = fns
+    keys = jax.random.split(jax.random.PRNGKey(5), NUM_ENVS)
+    state = jax.jit(jax.vmap(env.reset_perturbed, in_axes=(0, None, None)))(keys, 0.1, 2.0)
+    state = _with(state, 0, step=env.episode_steps - 1)  # env 0 reaches its time limit
+    state = step(state, jp.zeros((NUM_ENVS, 12)))
+    assert float(state.done[0]) == 1.0 and int(state.info["task"].step[0]) == 0
+    p = state.info["task"].params
+    np.testing.assert_array_equal(p.joint_offset_rad, np.full((NUM_ENVS, 12), 0.1, np.float32))
+    np.testing.assert_array_equal(p.odometry_level, np.full(NUM_ENVS, 2.0, np.float32))
+
+
 def test_robot_dropped_into_gap_terminates(env, fns):
     reset, step = fns
     state = reset(jax.random.split(jax.random.PRNGKey(3), NUM_ENVS))

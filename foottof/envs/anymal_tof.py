@@ -79,8 +79,10 @@ class AnymalToFEnv(Env):
       cfg: the full config (configs/base.py layout).
       source: foot-reading source, one of foottof.perception.SOURCES.
       terrain_map: a prebuilt map (default: built from ``cfg.terrain`` for ``cfg.stage``).
-      shank_scale: shank length scale of the *physics* model (evaluation perturbation); the
-        policy-side kinematics stay nominal.
+
+    The shank length scale of the *physics* model (an evaluation perturbation; the policy-side
+    kinematics stay nominal) is ``cfg.env.model.shank_scale``; joint-offset and odometry levels
+    are given at reset (:meth:`reset_perturbed`) and kept for the auto-reset episodes.
     """
 
     def __init__(
@@ -88,7 +90,6 @@ class AnymalToFEnv(Env):
         cfg,
         source: str = "tof",
         terrain_map: TerrainMap | None = None,
-        shank_scale: float | None = None,
     ):
         check_source(source, allow_all=False)
         rw.check_scales(cfg.reward.scales)
@@ -96,8 +97,7 @@ class AnymalToFEnv(Env):
         self.source = source
         ecfg = cfg.env
         model_kw = dict(ecfg.model)
-        cfg_shank = model_kw.pop("shank_scale", 1.0)
-        self.shank_scale = float(cfg_shank if shank_scale is None else shank_scale)
+        self.shank_scale = float(model_kw.pop("shank_scale", 1.0))
         self.foot_radius_m = float(model_kw.get("foot_radius_m", constants.FOOT_RADIUS_M))
         if terrain_map is None:
             spec = TerrainMapSpec.from_config(cfg.terrain, int(cfg.stage))
@@ -144,23 +144,25 @@ class AnymalToFEnv(Env):
         """Starts an episode on a random tile at curriculum level drawn from the initial range."""
         return self._reset_first(rng, None)
 
-    def reset_perturbed(self, rng: jax.Array, joint_offset_rad, odometry_level) -> State:
-        """``reset(rng)`` with this episode's evaluation perturbations given as (traced) values.
+    def reset_perturbed(
+        self, rng: jax.Array, joint_offset_rad=None, odometry_level=None
+    ) -> State:
+        """``reset(rng)`` with this env's evaluation perturbations given as (traced) values.
 
         The same draws as ``reset(rng)``; only the episode parameters ``joint_offset_rad`` (a
         static offset added to all 12 joint readings [rad]) and ``odometry_level`` (multiple of
-        the 100 % odometry noise) are replaced, so one compiled rollout serves every level of a
-        sweep. Episodes that ``step`` auto-resets draw them from the config again.
+        the 100 % odometry noise) are replaced (None: the config's value), so one compiled
+        rollout serves every level of a sweep. The env keeps them: episodes that ``step``
+        auto-resets carry them over.
         """
-        return self._reset_first(
-            rng,
-            {
-                "joint_offset_rad": jp.broadcast_to(
-                    jp.asarray(joint_offset_rad, jp.float32), (constants.NUM_JOINTS,)
-                ),
-                "odometry_level": jp.asarray(odometry_level, jp.float32),
-            },
-        )
+        overrides = {}
+        if joint_offset_rad is not None:
+            overrides["joint_offset_rad"] = jp.broadcast_to(
+                jp.asarray(joint_offset_rad, jp.float32), (constants.NUM_JOINTS,)
+            )
+        if odometry_level is not None:
+            overrides["odometry_level"] = jp.asarray(odometry_level, jp.float32)
+        return self._reset_first(rng, overrides)
 
     def _reset_first(self, rng: jax.Array, overrides: dict | None) -> State:
         key_lvl, key_col, key_ep = jax.random.split(rng, 3)
@@ -251,6 +253,7 @@ class AnymalToFEnv(Env):
         )
         new_level, new_col = self._curriculum(key_reset, task, base_pos[:2], success)
         fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
+        fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
         sel = lambda a, b: jax.tree_util.tree_map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
         next_task = sel(fresh_task, cont)
         next_d = sel(fresh_d, d)
@@ -466,3 +469,8 @@ class AnymalToFEnv(Env):
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),
             "privileged_state": jp.clip(jp.nan_to_num(priv), -lim, lim),
         }
+
+
+def _keep_perturbation(fresh: EpisodeParams, old: EpisodeParams) -> EpisodeParams:
+    """An auto-reset episode keeps the env's evaluation perturbation (given at reset)."""
+    return fresh.replace(joint_offset_rad=old.joint_offset_rad, odometry_level=old.odometry_level)

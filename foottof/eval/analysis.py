@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from foottof.eval.harness import make_eval_env_and_policy
+from foottof.eval.harness import make_eval_env_and_policy, perturbed_reset
 from foottof.eval.results import write_atomic
 from foottof.robot import kinematics
 from foottof.sensors import tof
@@ -44,8 +44,9 @@ def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
         cfg, source, checkpoint, key_map, key_init, perturbation, level
     )
     shank = env.shank_scale
-    reset, step = jax.jit(jax.vmap(env.reset)), jax.vmap(env.step)
-    state = reset(key_init[None])
+    reset = jax.jit(jax.vmap(perturbed_reset(env, perturbation), in_axes=(0, None)))
+    step = jax.vmap(env.step)
+    state = reset(key_init[None], jp.float32(level))
     act = networks.policy_fn(params, normalizer, deterministic=True)
     nf, nz = env.sensing.num_sensors, env.sensing.num_zones
 

@@ -16,24 +16,37 @@ from foottof.ppo.networks import make_networks
 
 
 def eval_config(cfg: ml_collections.ConfigDict, perturbation: str, level: float):
-    """Copy of `cfg` for one evaluation cell: DR off, the perturbation applied.
+    """Copy of `cfg` for one evaluation cell: DR off, nominal readings, the shank of the cell.
 
-    Returns (cfg, shank_scale) -- the shank scale is an env constructor argument.
+    Joint offset and odometry levels are not config: they are given at reset
+    (:func:`perturbed_reset`) and kept by the env across auto-resets. A shank-length level is the
+    physics model's ``env.model.shank_scale``.
+
+    Returns:
+      (cfg, shank_scale): the config and its ``env.model.shank_scale``.
     """
     c = copy.deepcopy(cfg)
     with c.unlocked():
         c.env.randomization.enabled = False  # no DR, no pushes
-        c.env.randomization.joint_offset_rad = 0.0
+        c.env.randomization.joint_offset_rad = 0.0  # nominal readings; levels come at reset
         c.env.randomization.odometry_level = 1.0  # the paper's nominal 100 %
         c.terrain.init_level_max = int(c.eval.num_levels) - 1  # spawn on every row
-        shank = 1.0
-        if perturbation == "joint_offset":
-            c.env.randomization.joint_offset_rad = float(level)
-        elif perturbation == "odometry":
-            c.env.randomization.odometry_level = float(level)
-        elif perturbation == "shank_length":
-            shank = float(level)
-    return c, shank
+        c.env.model.shank_scale = float(level) if perturbation == "shank_length" else 1.0
+    return c, float(c.env.model.shank_scale)
+
+
+def perturbed_reset(env, perturbation: str):
+    """The one way to start a perturbed episode: ``(key, level) -> State`` of ``env``.
+
+    Joint offset [rad] and odometry level [x 100 %] are (traceable) reset arguments
+    (``env.reset_perturbed``) that the env keeps for its auto-reset episodes; for 'none' and
+    'shank_length' (the env's physics model, :func:`eval_config`) ``level`` is ignored.
+    """
+    if perturbation == "joint_offset":
+        return lambda key, level: env.reset_perturbed(key, joint_offset_rad=level)
+    if perturbation == "odometry":
+        return lambda key, level: env.reset_perturbed(key, odometry_level=level)
+    return lambda key, level: env.reset(key)
 
 
 def eval_terrain_map(cfg: ml_collections.ConfigDict, key: jax.Array):
@@ -110,13 +123,14 @@ def make_eval_env_and_policy(
       checkpoint: checkpoint path, or None for a freshly initialized (untrained) policy.
       key_map: PRNG key of the terrain map (the same key gives the same ensemble).
       key_init: PRNG key of the policy initialization.
-      perturbation, level: the cell (``eval_config``); 'none' for the unperturbed env.
+      perturbation, level: the cell; only a shank length changes the env (``eval_config``),
+        the other levels are given at reset (:func:`perturbed_reset`).
 
     Returns:
       EvalSetup(env, networks, params, normalizer).
     """
-    c, shank = eval_config(cfg, perturbation, level)
-    env = make_env(c, source=source, terrain_map=eval_terrain_map(c, key_map), shank_scale=shank)
+    c, _ = eval_config(cfg, perturbation, level)
+    env = make_env(c, source=source, terrain_map=eval_terrain_map(c, key_map))
     obs = {k: jp.zeros((1, n), jp.float32) for k, n in env.observation_size.items()}  # no compile
     networks, params, normalizer = load_policy(c, env, obs, checkpoint, key_init)
     return EvalSetup(env, networks, params, normalizer)

@@ -23,7 +23,7 @@ import jax.numpy as jp
 import ml_collections
 import numpy as np
 
-from foottof.eval.harness import make_eval_env_and_policy
+from foottof.eval.harness import make_eval_env_and_policy, perturbed_reset
 from foottof.eval.results import summarize
 from foottof.perception import check_source
 
@@ -126,23 +126,16 @@ def default_levels(eval_cfg: ml_collections.ConfigDict, perturbation: str) -> tu
 def make_rollout(env, networks, num_envs: int, steps: int, perturbation: str = "none"):
     """jit-ed (params, normalizer, key, level) -> per-step (T, B) arrays done/success/failed/speed.
 
-    ``level`` is a traced argument for the ``TRACED_PERTURBATIONS`` (the first episode of every
-    env starts with ``env.reset_perturbed``), so one compile serves a whole sweep; for 'none' and
+    ``level`` is a traced argument for the ``TRACED_PERTURBATIONS`` (given at reset by
+    ``harness.perturbed_reset``), so one compile serves a whole sweep; for 'none' and
     'shank_length' it is ignored (the latter lives in the env's physics model).
     """
     if perturbation not in PERTURBATIONS:
         raise ValueError(
             f"unknown perturbation {perturbation!r}; valid choices: {list(PERTURBATIONS)}"
         )
-    rcfg = env.cfg.env.randomization
+    reset = jax.vmap(perturbed_reset(env, perturbation), in_axes=(0, None))
     step = jax.vmap(env.step)
-
-    def reset(keys, level):
-        if perturbation == "joint_offset":
-            return jax.vmap(lambda k: env.reset_perturbed(k, level, rcfg.odometry_level))(keys)
-        if perturbation == "odometry":
-            return jax.vmap(lambda k: env.reset_perturbed(k, rcfg.joint_offset_rad, level))(keys)
-        return jax.vmap(env.reset)(keys)
 
     def rollout(params, normalizer, key, level):
         key_reset, key_run = jax.random.split(key)
@@ -207,8 +200,7 @@ def evaluate_sweep(
     rows = []
     for group in groups:
         env, networks, params, normalizer = make_eval_env_and_policy(
-            cfg, source, checkpoint, key_map, key_init, "none" if traced else perturbation,
-            group[0],
+            cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
         )
         rollout = make_rollout(env, networks, num_envs, env.episode_steps, perturbation)
         for level in group:

@@ -17,8 +17,8 @@ def get_model_section() -> ml_collections.ConfigDict:
     m.solref_timeconst = 0.02  # contact stiffness time constant [s], >= 2 * timestep
     m.solref_dampratio = 1.0  # contact damping ratio [-]
     m.solver = "newton"  # MuJoCo constraint solver: newton | cg
-    m.iterations = 2  # solver iterations per physics step
-    m.ls_iterations = 4  # line-search iterations per solver iteration
+    m.iterations = 10  # max solver iterations per step (2: MuJoCo C falls, bench/NOTES.md)
+    m.ls_iterations = 10  # max line-search iterations per solver iteration
     m.cone = "pyramidal"  # friction cone: pyramidal | elliptic
     m.impratio = 100.0  # friction-to-normal impedance ratio [-]; 1 lets standing feet creep
     m.eulerdamp = False  # implicit joint damping in the Euler integrator (off: faster)

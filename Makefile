@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo learn test test-slow lint bench terrain-png render-deps clean
+.PHONY: demo learn wheels test test-slow lint bench terrain-png render-deps clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -21,6 +21,12 @@ demo: $(STAMP)
 learn: $(STAMP)
 	$(PY) train.py --config configs/flat.py $(LEARN_ARGS)
 	$(PY) -m foottof.ppo.curves runs/flat
+
+# Offline install (e.g. a GPU machine without internet): every wheel the project needs, in wheels/.
+# There: python3.11 -m venv .venv && .venv/bin/pip install --no-index --find-links wheels foottof
+# For NVIDIA GPUs add JAX's CUDA wheels: make wheels WHEEL_EXTRA='jax[cuda12]'
+wheels: $(STAMP)
+	$(PY) -m pip wheel --wheel-dir wheels . $(WHEEL_EXTRA)
 
 # Fast suite (what CI runs): everything not marked slow, plus lint.
 test: $(STAMP) render-deps

@@ -181,6 +181,8 @@ RULES = {
     "terrain.goal_y_spread_m": _nonneg,
     "terrain.init_level_max": _int(0),  # the env clips it to num_levels - 1
     "terrain.down_progress_frac": _frac,
+    "terrain.up_progress_frac": _frac,
+    "terrain.flat": _bool,
     # sensor, noise
     "sensor.sites": _non_empty_strs,
     "sensor.grid": _choice(*TOF_MAX_RATE_HZ),
@@ -222,6 +224,9 @@ RULES = {
     "env.clip_reward": _pos,
     "env.max_joint_speed_rads": _pos,
     "env.contact_margin_m": _nonneg,
+    "env.body_contact_margin_m": _num(),
+    "env.knee_contact_terminates": _bool,
+    "env.bootstrap_time_limit": _bool,
     "env.fall_height_above_floor_m": _nonneg,
     "env.max_tilt_deg": _num(0.0, 180.0, lo_open=True),
     "env.init_joint_noise_rad": _nonneg,
@@ -242,6 +247,10 @@ RULES = {
     "env.randomization.odometry_level": _num(*LEVEL_RANGES["odometry"]),
     # reward
     "reward.success_radius_m": _pos,
+    "reward.guidance_max_speed_ms": _pos,
+    "reward.stall_speed_ms": _nonneg,
+    "reward.stall_grace_s": _nonneg,
+    "reward.only_positive": _bool,
     "reward.scales.*": _num(),
     # ppo, network, train
     "ppo.num_envs": _int(1),
@@ -351,6 +360,12 @@ def _check_cross(c) -> None:
             f"must be in [ppo.lr_min, ppo.lr_max] = [{p.lr_min:g}, {p.lr_max:g}]",
         )
     t = c.terrain
+    if t.up_progress_frac < t.down_progress_frac:
+        _fail(
+            "terrain.up_progress_frac",
+            t.up_progress_frac,
+            f"must be in [terrain.down_progress_frac, 1] = [{t.down_progress_frac:g}, 1]",
+        )
     for s in (1, 2):
         w = dict(t[f"stage{s}_weights"])
         if not any(v > 0 for v in w.values()):

@@ -38,6 +38,8 @@ BAD = [
     ("ppo.num_minibatches", 0, ">= 1"),
     ("ppo.gamma", 1.5, "[0, 1]"),
     ("ppo.learning_rate", 0.5, "[ppo.lr_min, ppo.lr_max]"),
+    ("terrain.up_progress_frac", 0.3, "[terrain.down_progress_frac, 1]"),
+    ("terrain.up_progress_frac", 1.5, "[0, 1]"),
     ("ppo.lr_schedule", "cosine", "'adaptive'"),
     ("network.activation", "gelu", "'elu'"),
     ("network.actor_hidden", (64, 0), "integers >= 1"),

@@ -73,23 +73,31 @@ def test_shapes_and_no_nan_on_every_terrain(env, fns):
     assert dones > 0  # random actions end episodes (falls) and they auto-reset
 
 
-def _gap_xy(env):
-    """World xy of a pit vertex (height at the floor) inside a platform_gap tile, level 0."""
+def _gap_xy(env, level=0):
+    """World xy of the middle of the widest pit run (heights at the floor) along the centre line
+    of the platform_gap tile at ``level``, and its width [m]."""
     col = int(np.where(np.asarray(env.tmap.col_type) == TERRAIN_TYPES.index("platform_gap"))[0][0])
     h = np.asarray(env.hfield.heights)
     hf = env.hfield
     tile = env.tmap.spec.tile
     x_lo, x_hi = col * tile.length_m, (col + 1) * tile.length_m
-    y_mid = 0.5 * tile.width_m
+    y_mid = (level + 0.5) * tile.width_m
     i = int(round((y_mid - hf.y0_m) / hf.cell_m))
-    for j in range(h.shape[1]):
+    best = None
+    j = 0
+    while j < h.shape[1]:
         x = hf.x0_m + j * hf.cell_m
         if x_lo + 1.7 < x < x_hi and h[i, j] <= hf.z_floor_m + 1e-6:
-            # widest pit run starting here; use its middle
             k = j
             while h[i, k] <= hf.z_floor_m + 1e-6:
                 k += 1
-            return col, (hf.x0_m + 0.5 * (j + k - 1) * hf.cell_m, y_mid)
+            if best is None or k - j > best[1] - best[0]:
+                best = (j, k)
+            j = k
+        j += 1
+    if best is not None:
+        j, k = best
+        return col, (hf.x0_m + 0.5 * (j + k - 1) * hf.cell_m, y_mid), (k - j + 1) * hf.cell_m
     raise AssertionError("no gap found in the platform_gap tile")
 
 
@@ -132,11 +140,14 @@ def test_auto_reset_keeps_the_perturbation(env, fns):
 def test_robot_dropped_into_gap_terminates(env, fns):
     reset, step = fns
     state = reset(jax.random.split(jax.random.PRNGKey(3), NUM_ENVS))
-    col, (x, y) = _gap_xy(env)
+    col, (x, y), width = _gap_xy(env, level=env.tmap.num_levels - 1)  # the widest gaps
+    # Env 0 hovers over the pit at stance height above z = 0, turned 90 deg so that its stance
+    # width (feet at +-0.31 m) lies across the gap: nothing below its feet for ~1 m. (Along the
+    # gap's length it could stand across a gap narrower than its 0.9 m stance, as it should.)
+    assert width > 0.7, width
     qpos = state.pipeline_state.qpos
-    # Env 0 hovers over the pit at stance height above z = 0: nothing below it for ~1 m.
     qpos = qpos.at[0, 0:3].set(jp.array([x, y, env._stand_height + 0.05]))
-    qpos = qpos.at[0, 3:7].set(jp.array([1.0, 0.0, 0.0, 0.0]))
+    qpos = qpos.at[0, 3:7].set(jp.array([np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)]))
     state = state.replace(pipeline_state=state.pipeline_state.replace(qpos=qpos))
     failed = False
     for _ in range(40):  # 0.8 s of free fall is enough to drop > 1 m
@@ -261,7 +272,9 @@ def test_reward_terms_hand_checked():
     t = _terms(foot_vel=fv, foot_contact=jp.array([1.0, 0.0, 1.0, 1.0]))
     assert t["foot_slip"] == pytest.approx(0.25)
     # Orientation: gravity (0.6, 0, -0.8) -> 0.36.
-    assert _terms(projected_gravity=jp.array([0.6, 0.0, -0.8]))["orientation"] == pytest.approx(0.36)
+    assert _terms(projected_gravity=jp.array([0.6, 0.0, -0.8]))["orientation"] == pytest.approx(
+        0.36
+    )
     # Stall: slow and far after the grace period -> 1; before grace -> 0; at goal -> 0.
     assert _terms()["stall"] == 1.0
     assert _terms(time_s=jp.asarray(rcfg.stall_grace_s / 2))["stall"] == 0.0

@@ -66,8 +66,9 @@ DEFAULT_TUNING = {
     "solref_timeconst": 0.02,  # contact solref[0] time constant [s] (>= 2 * timestep)
     "solref_dampratio": 1.0,  # contact solref[1] damping ratio [-]
     "solver": "newton",  # constraint solver: newton | cg
-    "iterations": 2,  # solver iterations (1 lets standing feet slide ~14 cm in 5 s)
-    "ls_iterations": 4,  # line-search iterations
+    "iterations": 10,  # max solver iterations (1 lets standing feet slide ~14 cm in 5 s; at 2
+    # MuJoCo C's unconverged solve fails 22 % of random-action episodes, bench/NOTES.md)
+    "ls_iterations": 10,  # max line-search iterations
     "cone": "pyramidal",  # friction cone: pyramidal | elliptic
     "impratio": 100.0,  # frictional-to-normal impedance ratio [-] (1 lets feet creep ~26 cm/20 s)
     "eulerdamp": False,  # implicit joint damping in the Euler integrator (off: faster)

@@ -17,10 +17,13 @@ import sys
 from absl import app, flags, logging
 from ml_collections import config_flags
 
-_CONFIG = config_flags.DEFINE_config_file("config", "configs/base.py", "Config file (configs/*.py).")
+_CONFIG = config_flags.DEFINE_config_file(
+    "config", "configs/base.py", "Config file (configs/*.py)."
+)
 _SOURCE = flags.DEFINE_string("source", "tof", "tof | mock_ideal | mock_aggre | all.")
 _PERT = flags.DEFINE_string(
-    "perturbation", None,
+    "perturbation",
+    None,
     "none | joint_offset | shank_length | odometry | all (the 3 sweeps). Default: each source's "
     "sweep in the paper's robustness figure: tof -> joint_offset, mock_ideal -> joint_offset, "
     "mock_aggre -> odometry (robustness.HEADLINE_SWEEPS); none with --analyze / --export.",
@@ -46,8 +49,10 @@ def _check_analyze(sources, plan) -> None:
     if len(plan) != 1 or len(plan[0][2]) != 1:
         perts = sorted({p for _, p, _ in plan})
         levels = [lv for _, _, lvs in plan for lv in lvs]
-        raise ValueError(f"--analyze runs one cell: give one perturbation and one level "
-                         f"(--levels), got {'/'.join(perts)} with levels {levels}")
+        raise ValueError(
+            f"--analyze runs one cell: give one perturbation and one level "
+            f"(--levels), got {'/'.join(perts)} with levels {levels}"
+        )
     if _VIDEO_STRIDE.value < 1:
         raise ValueError(f"--video_stride {_VIDEO_STRIDE.value}: must be >= 1")
 
@@ -62,11 +67,18 @@ def _analyze(cfg, plan, ckpt, key, out: str) -> None:
     env, trace = analysis.record_episode(cfg, source, ckpt, key, pert, level)
     tag = source if pert == "none" else f"{source}_{pert}_{level:g}"
     written = analysis.write_analysis(
-        env, trace, out, tag, _VIDEO.value, _VIDEO_STRIDE.value,
+        env,
+        trace,
+        out,
+        tag,
+        _VIDEO.value,
+        _VIDEO_STRIDE.value,
         progress=lambda n: tqdm(total=n, unit="frame", desc="render"),
     )
-    print(f"[evaluate] episode: {len(trace['qpos'])} steps, success={trace['success']}, "
-          f"failed={trace['failed']}; wrote {', '.join(written)}")
+    print(
+        f"[evaluate] episode: {len(trace['qpos'])} steps, success={trace['success']}, "
+        f"failed={trace['failed']}; wrote {', '.join(written)}"
+    )
 
 
 def _export(cfg, source: str, ckpt, key) -> None:
@@ -120,8 +132,9 @@ def main(argv):
         total = sum(len(levels) for _, _, levels in plan) * int(cfg.eval.episodes)
         with tqdm(total=total, unit="ep", desc="evaluate") as bar:
             rows = rb.run_sweeps(cfg, plan, ckpt, key, bar)
-        paths = results.write_run(out, _SOURCE.value, pert, rows, ckpt,
-                                  float(cfg.env.episode_length_s))
+        paths = results.write_run(
+            out, _SOURCE.value, pert, rows, ckpt, float(cfg.env.episode_length_s)
+        )
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")
     print(results.format_table(rows))

@@ -48,8 +48,10 @@ def main() -> None:
     cfg = load_config(args.config)
     key = jax.random.PRNGKey(0)
     print(f"device: {jax.devices()[0].device_kind}  config: {args.config}  steps: {args.steps}")
-    print(f"{'source':<11}{'envs':>6}{'compile s':>11}{'env-steps/s':>13}{'1000 ep. cell':>15}"
-          f"{'RSS MiB':>9}{'GPU MiB':>9}")
+    print(
+        f"{'source':<11}{'envs':>6}{'compile s':>11}{'env-steps/s':>13}{'1000 ep. cell':>15}"
+        f"{'RSS MiB':>9}{'GPU MiB':>9}"
+    )
     for source in args.sources:
         env, nets, params, norm = make_eval_env_and_policy(cfg, source, None, key, key)
         for n in args.envs:
@@ -62,8 +64,11 @@ def main() -> None:
             sps = n * args.steps / (time.perf_counter() - t0)
             cell_min = 1000 * env.episode_steps / sps / 60
             rss = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
-            print(f"{source:<11}{n:>6}{compile_s:>11.1f}{sps:>13,.0f}{cell_min:>12.1f} min"
-                  f"{rss:>9,.0f}{_gpu_peak_mib():>9}", flush=True)
+            print(
+                f"{source:<11}{n:>6}{compile_s:>11.1f}{sps:>13,.0f}{cell_min:>12.1f} min"
+                f"{rss:>9,.0f}{_gpu_peak_mib():>9}",
+                flush=True,
+            )
 
 
 if __name__ == "__main__":

@@ -46,8 +46,9 @@ def main() -> None:
     obs = jp.zeros((1, args.obs))
     params = jax.jit(networks.init_params)(jax.random.PRNGKey(0), obs)
     with tempfile.TemporaryDirectory() as tmp:
-        path = export.export_policy(os.path.join(tmp, "policy.npz"), networks, params,
-                                    networks.init_normalizer(obs))
+        path = export.export_policy(
+            os.path.join(tmp, "policy.npz"), networks, params, networks.init_normalizer(obs)
+        )
         size_kb = os.path.getsize(path) / 1024
         policy = export.NumpyPolicy(path)
     xs = np.random.default_rng(0).normal(size=(args.calls, args.obs)).astype(np.float32)
@@ -59,11 +60,15 @@ def main() -> None:
         policy(x)
         times[i] = time.perf_counter() - t0
     ms = times * 1e3
-    print(f"NumPy policy: obs {args.obs}, LSTM {cfg.lstm_hidden_size}x{cfg.lstm_num_layers}, "
-          f"MLP {tuple(cfg.actor_hidden)}, file {size_kb:.0f} KiB, BLAS threads "
-          f"{args.threads or 'default'}")
-    print(f"per call [ms]: mean {ms.mean():.3f}  median {np.median(ms):.3f}  "
-          f"p99 {np.percentile(ms, 99):.3f}  max {ms.max():.3f}   (50 Hz budget: 20 ms)")
+    print(
+        f"NumPy policy: obs {args.obs}, LSTM {cfg.lstm_hidden_size}x{cfg.lstm_num_layers}, "
+        f"MLP {tuple(cfg.actor_hidden)}, file {size_kb:.0f} KiB, BLAS threads "
+        f"{args.threads or 'default'}"
+    )
+    print(
+        f"per call [ms]: mean {ms.mean():.3f}  median {np.median(ms):.3f}  "
+        f"p99 {np.percentile(ms, 99):.3f}  max {ms.max():.3f}   (50 Hz budget: 20 ms)"
+    )
     print(f"calls/s: {1.0 / times.mean():,.0f}")
 
 

@@ -55,8 +55,12 @@ def _add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     e.clip_reward = 100.0  # each scaled reward term is clipped to +-this per step [-]
     e.max_joint_speed_rads = 100.0  # faster joints/base mean the simulation diverged: fail [rad/s]
     e.contact_margin_m = 0.01  # a foot within this of the surface counts as in contact [m]
-    e.body_contact_margin_m = 0.0  # base sphere clearance below this terminates; knees: see below [m]
-    e.knee_contact_terminates = False  # knee contact ends the episode (else reward.scales.collision)
+    e.body_contact_margin_m = (
+        0.0  # base sphere clearance below this terminates; knees: see below [m]
+    )
+    e.knee_contact_terminates = (
+        False  # knee contact ends the episode (else reward.scales.collision)
+    )
     e.bootstrap_time_limit = False  # bootstrap V at the deadline; False: the deadline is terminal
     e.fall_height_above_floor_m = 0.5  # base below pit floor + this terminates (fell in a gap) [m]
     e.foot_fall_z_m = -0.45  # a foot below this world z terminates (deep in a gap) [m]

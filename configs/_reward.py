@@ -12,8 +12,12 @@ def get_section() -> ml_collections.ConfigDict:
     r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
     s = ml_collections.ConfigDict()
     s.reach = 10.0  # sparse: +1 at the last step if within success_radius_m of the goal
-    s.guidance = 5.0  # dense: base velocity toward the goal, clipped at guidance_max_speed_ms [per s]
-    s.termination = -1.0  # sparse: 1 on a failure termination (fall, base contact, flip, divergence)
+    s.guidance = (
+        5.0  # dense: base velocity toward the goal, clipped at guidance_max_speed_ms [per s]
+    )
+    s.termination = (
+        -1.0
+    )  # sparse: 1 on a failure termination (fall, base contact, flip, divergence)
     s.torques = -1e-5  # sum of squared joint torques [(N m)^2]
     s.joint_acc = -2.5e-7  # sum of squared joint accelerations [(rad/s^2)^2]
     s.action_rate = -0.01  # sum of squared action differences between control steps
@@ -21,7 +25,9 @@ def get_section() -> ml_collections.ConfigDict:
     s.orientation = -1.0  # squared norm of the horizontal part of projected gravity
     s.stall = -0.5  # 1 while stalling (slow and not within success radius) after the grace period
     s.jump = -1.0  # 1 while all four feet are off the ground (no foot within the contact margin)
-    s.posture = -0.5  # after reaching the goal: sum of squared deviations from the default pose [rad^2]
+    s.posture = (
+        -0.5
+    )  # after reaching the goal: sum of squared deviations from the default pose [rad^2]
     s.collision = -1.0  # number of knee spheres touching the terrain (not a termination) [per s]
     r.scales = s
     return r

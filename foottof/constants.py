@@ -22,10 +22,18 @@ VELOCITY_LIMIT_RADS = 8.5
 
 # Nominal standing pose (IsaacLab ANYMAL_D_CFG): HAA, HFE, KFE per leg in FEET order.
 DEFAULT_POSE = (
-    0.0, 0.4, -0.8,  # LF
-    0.0, 0.4, -0.8,  # RF
-    0.0, -0.4, 0.8,  # LH
-    0.0, -0.4, 0.8,  # RH
+    0.0,
+    0.4,
+    -0.8,  # LF
+    0.0,
+    0.4,
+    -0.8,  # RF
+    0.0,
+    -0.4,
+    0.8,  # LH
+    0.0,
+    -0.4,
+    0.8,  # RH
 )
 NOMINAL_BASE_HEIGHT_M = 0.589  # base height over flat ground in DEFAULT_POSE, feet touching
 ACTION_SCALE = 0.5  # joint target = DEFAULT_POSE + ACTION_SCALE * action

@@ -102,8 +102,10 @@ def test_numpy_export_matches_jax_over_recorded_episode(episode, tmp_path):
     observations (LSTM carried over the episode), with a non-trivial normalizer and output."""
     cfg, env, trace = episode
     c, _ = harness.eval_config(cfg, "none", 0.0)
-    obs0 = {"state": jp.asarray(trace["policy_obs"][:1]),
-            "privileged_state": jp.zeros((1, env.observation_size["privileged_state"]))}
+    obs0 = {
+        "state": jp.asarray(trace["policy_obs"][:1]),
+        "privileged_state": jp.zeros((1, env.observation_size["privileged_state"])),
+    }
     # The fresh policy that record_episode ran (same key split) reproduces its actions.
     key_init = jax.random.split(KEY, 3)[1]
     nets, params, norm = harness.load_policy(c, env, obs0, None, key_init)
@@ -121,7 +123,8 @@ def test_numpy_export_matches_jax_over_recorded_episode(episode, tmp_path):
     # Make it non-trivial: a large output layer and a non-identity normalizer.
     rng = np.random.default_rng(0)
     p = jax.tree_util.tree_map_with_path(
-        lambda path, x: x * 100.0 if "out" in jax.tree_util.keystr(path) else x, params)
+        lambda path, x: x * 100.0 if "out" in jax.tree_util.keystr(path) else x, params
+    )
     size = trace["policy_obs"].shape[1]
     norm = norm.replace(
         mean=dict(norm.mean, state=jp.asarray(rng.normal(size=size), jp.float32)),
@@ -144,7 +147,11 @@ def test_rays_are_drawn(episode):
     assert plain.shape == (240, 320, 3) and plain.std() > 5  # a scene, not a blank frame
 
     def green(img):  # the ray colour (RAY_HIT_RGBA): green well above red and blue
-        return (img[..., 1] > 150) & (img[..., 1] > img[..., 0] + 60) & (img[..., 1] > img[..., 2] + 60)
+        return (
+            (img[..., 1] > 150)
+            & (img[..., 1] > img[..., 0] + 60)
+            & (img[..., 1] > img[..., 2] + 60)
+        )
 
     assert green(drawn).sum() > green(plain).sum() + 20
     assert (np.abs(drawn - plain).sum(-1) > 30).mean() < 0.2  # rays, not a different scene
@@ -155,7 +162,10 @@ def test_write_analysis_outputs(episode, tmp_path):
     stride = 8
     paths = analysis.write_analysis(env, trace, str(tmp_path), "tof", "mp4", stride)
     assert sorted(os.path.basename(p) for p in paths) == [
-        "analysis_tof.png", "episode_tof.npz", "rollout_tof.mp4"]
+        "analysis_tof.png",
+        "episode_tof.npz",
+        "rollout_tof.mp4",
+    ]
     assert sorted(os.listdir(tmp_path)) == sorted(os.path.basename(p) for p in paths)
     frames = imageio.mimread(str(tmp_path / "rollout_tof.mp4"))
     assert len(frames) == -(-len(trace["qpos"]) // stride)
@@ -168,7 +178,8 @@ def test_write_analysis_outputs(episode, tmp_path):
     gif = analysis.write_analysis(env, trace, str(tmp_path / "g"), "x", "gif", 12)[-1]
     assert len(imageio.mimread(gif)) == -(-len(trace["qpos"]) // 12)
     assert analysis.write_analysis(env, trace, str(tmp_path / "n"), "x", "none")[-1].endswith(
-        "episode_x.npz")
+        "episode_x.npz"
+    )
 
 
 def test_bad_video_inputs(episode, tmp_path):

@@ -103,10 +103,20 @@ def test_check_inputs():
 
 def test_robustness_png_panels_without_data():
     rows = [
-        {"source": s, "perturbation": "odometry", "level": lv, "episodes": 10, "successes": k,
-         "success_rate": k / 10, "ci_low": results.wilson_interval(k, 10)[0],
-         "ci_high": results.wilson_interval(k, 10)[1], "mean_speed_ms": 0.5, "falls": 1}
-        for s in ("tof", "mock_aggre") for lv, k in ((0.0, 9), (2.0, 5))
+        {
+            "source": s,
+            "perturbation": "odometry",
+            "level": lv,
+            "episodes": 10,
+            "successes": k,
+            "success_rate": k / 10,
+            "ci_low": results.wilson_interval(k, 10)[0],
+            "ci_high": results.wilson_interval(k, 10)[1],
+            "mean_speed_ms": 0.5,
+            "falls": 1,
+        }
+        for s in ("tof", "mock_aggre")
+        for lv, k in ((0.0, 9), (2.0, 5))
     ]
     png = plots.robustness_png(rows)
     assert png[:8] == b"\x89PNG\r\n\x1a\n"
@@ -118,8 +128,10 @@ def test_default_sweep_is_the_sources_headline_sweep():
     odo, joint = tuple(e.odometry_levels), tuple(e.joint_offset_levels)
     assert rb.sweep_plan(e, ("mock_aggre",), None) == [("mock_aggre", "odometry", odo)]
     assert rb.sweep_plan(e, check_source("all"), None) == [
-        ("tof", "joint_offset", joint), ("mock_ideal", "joint_offset", joint),
-        ("mock_aggre", "odometry", odo)]
+        ("tof", "joint_offset", joint),
+        ("mock_ideal", "joint_offset", joint),
+        ("mock_aggre", "odometry", odo),
+    ]
     assert rb.sweep_plan(e, ("tof",), None, ["0", "0.2"]) == [("tof", "joint_offset", (0.0, 0.2))]
     with pytest.raises(ValueError, match="needs --perturbation"):
         rb.sweep_plan(e, check_source("all"), None, ["1"])
@@ -154,7 +166,11 @@ def test_cli_bad_input(args, message, tmp_path):
     env = dict(os.environ, JAX_PLATFORMS="cpu")
     p = subprocess.run(
         [sys.executable, os.path.join(REPO, "evaluate.py"), "--out", str(tmp_path), *args],
-        cwd=REPO, capture_output=True, text=True, env=env, timeout=300,
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=300,
     )
     assert p.returncode != 0
     err_lines = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
@@ -167,8 +183,9 @@ def test_cli_bad_input(args, message, tmp_path):
 def e2e(tmp_path_factory):
     cfg = tiny_cfg()
     out = str(tmp_path_factory.mktemp("eval"))
-    rows = rb.evaluate_sweep(cfg, "mock_ideal", "odometry", (0.0, 2.0), None,
-                             jax.random.PRNGKey(0))  # one compile for both levels
+    rows = rb.evaluate_sweep(
+        cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0)
+    )  # one compile for both levels
     doc = results.results_document(rows, None, cfg.env.episode_length_s)
     paths = results.write_results(out, "mock_ideal", "odometry", doc)
     return cfg, out, rows, paths
@@ -177,7 +194,9 @@ def e2e(tmp_path_factory):
 def test_end_to_end_writes_outputs(e2e):
     _, out, rows, paths = e2e
     assert sorted(os.listdir(out)) == [
-        "results_mock_ideal_odometry.csv", "results_mock_ideal_odometry.json", "robustness.png"
+        "results_mock_ideal_odometry.csv",
+        "results_mock_ideal_odometry.json",
+        "robustness.png",
     ]
     with open(paths["json"]) as f:
         doc = json.load(f)
@@ -191,7 +210,10 @@ def test_end_to_end_writes_outputs(e2e):
         assert math.isfinite(r["mean_speed_ms"]) and r["mean_speed_ms"] >= 0
     with open(paths["csv"]) as f:
         csv_rows = list(csv.DictReader(f))
-    assert tuple(csv_rows[0]) == results.RESULT_KEYS and [int(r["episodes"]) for r in csv_rows] == [4, 4]
+    assert tuple(csv_rows[0]) == results.RESULT_KEYS and [int(r["episodes"]) for r in csv_rows] == [
+        4,
+        4,
+    ]
     with open(paths["png"], "rb") as f:
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
     assert "mock_ideal" in results.format_table(rows)
@@ -202,9 +224,18 @@ def _save_checkpoint(run_dir, params, normalizer):
     from foottof.ppo.train import TrainState
 
     z = jp.zeros(1)
-    state = TrainState(params=params, opt_state=z, normalizer=normalizer, env_state=z, carry=z,
-                       prev_done=z, ep_return=z, ep_length=z, key=jax.random.PRNGKey(0),
-                       iteration=jp.asarray(1, jp.int32))
+    state = TrainState(
+        params=params,
+        opt_state=z,
+        normalizer=normalizer,
+        env_state=z,
+        carry=z,
+        prev_done=z,
+        ep_return=z,
+        ep_length=z,
+        key=jax.random.PRNGKey(0),
+        iteration=jp.asarray(1, jp.int32),
+    )
     ck = Checkpointer(run_dir, save_env_state=False)
     ck.save(state)
     ck.close()
@@ -223,8 +254,9 @@ def test_checkpoint_layout_mismatch_and_roundtrip(tmp_path):
     key = jax.random.PRNGKey(1)
     # A checkpoint of a different observation layout (8 fewer actor inputs).
     other = {k: jp.zeros((1, n - 8)) for k, n in sizes.items()}
-    _save_checkpoint(str(tmp_path / "other"), nets.init_params(key, other),
-                     nets.init_normalizer(other))
+    _save_checkpoint(
+        str(tmp_path / "other"), nets.init_params(key, other), nets.init_normalizer(other)
+    )
     with pytest.raises(ValueError, match=rf"observation sizes .*{sizes['state']}.*checkpoint"):
         harness.load_policy(c, env, obs, str(tmp_path / "other"), key)
     with pytest.raises(FileNotFoundError, match="does not exist"):
@@ -244,22 +276,55 @@ def test_checkpoint_layout_mismatch_and_roundtrip(tmp_path):
 @pytest.mark.slow
 def test_cli_analyze_and_export_end_to_end(tmp_path):  # two env compiles in subprocesses (~3 min)
     env = dict(os.environ, JAX_PLATFORMS="cpu")
-    tiny = ["--config", os.path.join(REPO, "configs", "smoke.py"),
-            "--config.env.episode_length_s=0.5", "--config.eval.num_levels=2",
-            "--config.eval.num_cols=5", "--untrained", "--out", str(tmp_path)]
+    tiny = [
+        "--config",
+        os.path.join(REPO, "configs", "smoke.py"),
+        "--config.env.episode_length_s=0.5",
+        "--config.eval.num_levels=2",
+        "--config.eval.num_cols=5",
+        "--untrained",
+        "--out",
+        str(tmp_path),
+    ]
     p = subprocess.run(
-        [sys.executable, os.path.join(REPO, "evaluate.py"), "--analyze", "--source", "mock_aggre",
-         "--perturbation", "odometry", "--levels", "2", "--video", "gif", "--video_stride", "5",
-         *tiny], cwd=REPO, capture_output=True, text=True, env=env, timeout=900)
+        [
+            sys.executable,
+            os.path.join(REPO, "evaluate.py"),
+            "--analyze",
+            "--source",
+            "mock_aggre",
+            "--perturbation",
+            "odometry",
+            "--levels",
+            "2",
+            "--video",
+            "gif",
+            "--video_stride",
+            "5",
+            *tiny,
+        ],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
     assert p.returncode == 0, p.stderr[-3000:]
     tag = "mock_aggre_odometry_2"
     assert sorted(os.listdir(tmp_path)) == sorted(
-        [f"analysis_{tag}.png", f"episode_{tag}.npz", f"rollout_{tag}.gif"])
+        [f"analysis_{tag}.png", f"episode_{tag}.npz", f"rollout_{tag}.gif"]
+    )
     with np.load(tmp_path / f"episode_{tag}.npz") as f:
         assert f["qpos"].shape[1] == 19 and str(f["source"]) == "mock_aggre"
     out = tmp_path / "policy.npz"
-    p = subprocess.run([sys.executable, os.path.join(REPO, "evaluate.py"), "--export", str(out),
-                        *tiny], cwd=REPO, capture_output=True, text=True, env=env, timeout=900)
+    p = subprocess.run(
+        [sys.executable, os.path.join(REPO, "evaluate.py"), "--export", str(out), *tiny],
+        cwd=REPO,
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=900,
+    )
     assert p.returncode == 0, p.stderr[-3000:]
     from foottof.ppo.export import NumpyPolicy
 

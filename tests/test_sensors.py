@@ -362,12 +362,15 @@ def _run(spec, bounds, phase, n_steps, key=0):
 
 @pytest.mark.parametrize("k", [0, 1, 3])
 def test_delay_returns_reading_k_steps_earlier(k):
-    spec = TimingSpec(ToFSpec(
-        num_sensors=2,
-        rate_hz=50.0,
-        tilt_deg=((0.0, 0.0),) * 2,
-        offset_m=((0.0, 0.0, 0.0),) * 2,
-    ), delay_capacity_steps=4)
+    spec = TimingSpec(
+        ToFSpec(
+            num_sensors=2,
+            rate_hz=50.0,
+            tilt_deg=((0.0, 0.0),) * 2,
+            offset_m=((0.0, 0.0, 0.0),) * 2,
+        ),
+        delay_capacity_steps=4,
+    )
     d, age, delay = _run(spec, _zero_bounds(k, k), [0.0, 0.0], 12)
     assert delay == k
     for n in range(13):  # frames at every control step (50 Hz, phase 0): value of step n - k
@@ -397,13 +400,16 @@ def test_delay_draw_and_capacity():
 
 def test_sample_and_hold_ages_60hz_and_15hz():
     for grid, rate in ((4, 60.0), (8, 15.0)):
-        spec = TimingSpec(ToFSpec(
-            num_sensors=2,
-            grid=grid,
-            rate_hz=rate,
-            tilt_deg=((0.0, 0.0),) * 2,
-            offset_m=((0.0, 0.0, 0.0),) * 2,
-        ), delay_capacity_steps=0)
+        spec = TimingSpec(
+            ToFSpec(
+                num_sensors=2,
+                grid=grid,
+                rate_hz=rate,
+                tilt_deg=((0.0, 0.0),) * 2,
+                offset_m=((0.0, 0.0, 0.0),) * 2,
+            ),
+            delay_capacity_steps=0,
+        )
         phase = np.array([0.3, 0.7]) / rate  # no completion exactly between two steps
         d, age, _ = _run(spec, _zero_bounds(0, 0), phase, 30)
         period = 1 / rate

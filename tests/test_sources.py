@@ -84,8 +84,9 @@ def test_camera_blind_zones_cover_belly_and_feet():
     1.5 m ahead, behind and to the sides is seen, and far corners (> 3 m) are not."""
     fk_feet = [(0.495, 0.31), (0.495, -0.31), (-0.495, 0.31), (-0.495, -0.31), (0.0, 0.0)]
     blind = jp.array([[x, y, GROUND_REL] for x, y in fk_feet])
-    seen = jp.array([[1.5, 0, GROUND_REL], [-1.5, 0, GROUND_REL], [0, 1.2, GROUND_REL],
-                     [0, -1.2, GROUND_REL]])
+    seen = jp.array(
+        [[1.5, 0, GROUND_REL], [-1.5, 0, GROUND_REL], [0, 1.2, GROUND_REL], [0, -1.2, GROUND_REL]]
+    )
     far = jp.array([[2.45, 2.45, GROUND_REL]])
     assert not np.any(cam_lib.visible(blind))
     assert np.all(cam_lib.visible(seen))
@@ -122,8 +123,9 @@ def test_height_scan_matches_mj_ray(stones_hf):
     geomid = np.zeros(1, np.int32)
     errs = []
     for i, j in zip(*np.nonzero(inside), strict=True):
-        dist = mujoco.mj_ray(m, d, np.array([wx[i, j], wy[i, j], 5.0]), np.array([0, 0, -1.0]),
-                             None, 1, -1, geomid)
+        dist = mujoco.mj_ray(
+            m, d, np.array([wx[i, j], wy[i, j], 5.0]), np.array([0, 0, -1.0]), None, 1, -1, geomid
+        )
         errs.append(abs((5.0 - dist) - (scan[i, j] + base[2])))
     assert max(errs) < 1e-4
 
@@ -156,8 +158,9 @@ def _walk(n_steps: int, v_fwd: float, yaw_rate: float, start=(2.0, 2.0, 0.6)):
     pitch = 0.03 * np.cos(2 * np.pi * 2.0 * t)
     idx = np.arange(0, n_steps * sub + 1, sub)
     pos = np.stack([x, y, z], -1)[idx]
-    quat = np.stack([_quat(r, p, w) for r, p, w in zip(roll[idx], pitch[idx], yaw[idx],
-                                                          strict=True)])
+    quat = np.stack(
+        [_quat(r, p, w) for r, p, w in zip(roll[idx], pitch[idx], yaw[idx], strict=True)]
+    )
     rot = np.asarray(em.tilt_rotation(jp.asarray(quat)))  # (n+1, 3, 3) roll/pitch only
     rz = np.asarray(em._rot_z(jp.asarray(yaw[idx])))
     r_full = rz @ rot
@@ -165,8 +168,9 @@ def _walk(n_steps: int, v_fwd: float, yaw_rate: float, start=(2.0, 2.0, 0.6)):
     v_base = np.einsum("kji,kj->ki", r_full[1:], v_world)
     # Angular velocity from consecutive orientations: R_{k-1}^T R_k = exp([w] dt) (base frame).
     rel = np.einsum("kji,kjl->kil", r_full[:-1], r_full[1:])
-    w_base = np.stack([rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0],
-                       rel[:, 1, 0] - rel[:, 0, 1]], -1) / (2 * DT)
+    w_base = np.stack(
+        [rel[:, 2, 1] - rel[:, 1, 2], rel[:, 0, 2] - rel[:, 2, 0], rel[:, 1, 0] - rel[:, 0, 1]], -1
+    ) / (2 * DT)
     f32 = lambda a: jp.asarray(a, jp.float32)
     return f32(pos), f32(quat), f32(v_base), f32(w_base)
 
@@ -229,8 +233,9 @@ def test_update_with_reset_equals_a_fresh_map(drift_runs, stones_hf):
     upd = jax.jit(em.aggre_update, static_argnames=("dt",))
     fresh = jax.jit(em.aggre_init)(stones_hf, p, q)
     got = upd(drifted, stones_hf, p, q, v, w, dt=DT, reset=jp.asarray(True))
-    for name, a, b in zip(fresh.__dataclass_fields__, jax.tree.leaves(got),
-                          jax.tree.leaves(fresh), strict=True):
+    for name, a, b in zip(
+        fresh.__dataclass_fields__, jax.tree.leaves(got), jax.tree.leaves(fresh), strict=True
+    ):
         if np.issubdtype(np.asarray(a).dtype, np.floating):  # two compiles: rounding only
             np.testing.assert_allclose(a, b, atol=1e-4, rtol=0, err_msg=name)
         else:
@@ -258,12 +263,14 @@ def straight_walk():
     cell per step (12 steps). Returns (terrain, final pos, final quat, final map state)."""
     hf = _ridge_hf(3)
     n = 12
-    pos = jp.stack([jp.array([2.0, 2.0, 0.65]) + jp.array([0.05, 0.0, 0.0]) * k
-                    for k in range(n + 1)])
+    pos = jp.stack(
+        [jp.array([2.0, 2.0, 0.65]) + jp.array([0.05, 0.0, 0.0]) * k for k in range(n + 1)]
+    )
     quat = jp.tile(jp.array([1.0, 0.0, 0.0, 0.0]), (n + 1, 1))
     v = jp.tile(jp.array([2.5, 0.0, 0.0]), (n, 1))
-    states, _ = _run_map(hf, (pos, quat, v, jp.zeros((n, 3))), jp.zeros(1),
-                         jax.random.split(jax.random.key(0), 1))
+    states, _ = _run_map(
+        hf, (pos, quat, v, jp.zeros((n, 3))), jp.zeros(1), jax.random.split(jax.random.key(0), 1)
+    )
     return hf, pos[-1], quat[-1], jax.tree.map(lambda a: a[0], states)
 
 
@@ -279,8 +286,15 @@ def test_straight_walk_by_whole_cells_remembers_exactly(straight_walk):
 def test_update_bad_dt_and_level_raise(stones_hf):
     state = em.aggre_init(stones_hf, jp.array([2.0, 2.0, 0.6]), jp.array([1.0, 0, 0, 0]))
     with pytest.raises(ValueError, match="dt=0.0"):
-        em.aggre_update(state, stones_hf, jp.array([2.0, 2.0, 0.6]), jp.array([1.0, 0, 0, 0]),
-                        jp.zeros(3), jp.zeros(3), 0.0)
+        em.aggre_update(
+            state,
+            stones_hf,
+            jp.array([2.0, 2.0, 0.6]),
+            jp.array([1.0, 0, 0, 0]),
+            jp.zeros(3),
+            jp.zeros(3),
+            0.0,
+        )
     with pytest.raises(ValueError, match="level=-1"):
         odom.noisy_odometry(jax.random.key(0), jp.zeros(3), jp.zeros(3), -1.0)
 
@@ -331,8 +345,10 @@ def _poses(hf, n, seed, aligned):
 @jax.jit
 def _aggre_and_ideal(state, hf, pos, quat, q):
     """(mock_aggre, mock_ideal) readings of one robot (one compile shared by several tests)."""
-    return (sources.mock_aggre_readings(TOF, state, quat, q),
-            sources.mock_ideal_readings(TOF, hf, pos, quat, q))
+    return (
+        sources.mock_aggre_readings(TOF, state, quat, q),
+        sources.mock_ideal_readings(TOF, hf, pos, quat, q),
+    )
 
 
 @jax.jit
@@ -424,8 +440,9 @@ def test_shank_scale_changes_physics_not_the_kinematic_model():
     for scale in (1.0, 1.2):
         m = make_model(None, shank_scale=scale)
         d = mujoco.MjData(m)
-        d.qpos[:] = np.concatenate([np.asarray(pos[0], float), np.asarray(quat[0], float),
-                                    np.asarray(q[0], float)])
+        d.qpos[:] = np.concatenate(
+            [np.asarray(pos[0], float), np.asarray(quat[0], float), np.asarray(q[0], float)]
+        )
         mujoco.mj_kinematics(m, d)
         sites = [m.site(n).id for n in constants.TOF_SITES]
         knees = [m.body(f"{leg}_shank").id for leg in constants.FEET]
@@ -461,11 +478,20 @@ def test_mock_aggre_equals_mock_ideal_when_all_cells_in_view(stones_hf):
     q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
     state = em.aggre_init(stones_hf, pos[0], quat[0], see_all=True)
     for k in range(1, 4):
-        state = em.aggre_update(state, stones_hf, pos[k], quat[k], jp.array([0.8, 0.0, 0.0]),
-                                jp.array([0.0, 0.0, 0.3]), DT, see_all=True)
+        state = em.aggre_update(
+            state,
+            stones_hf,
+            pos[k],
+            quat[k],
+            jp.array([0.8, 0.0, 0.0]),
+            jp.array([0.0, 0.0, 0.3]),
+            DT,
+            see_all=True,
+        )
     assert bool(state.scan_in_view.all())
-    np.testing.assert_array_equal(state.scan, em.height_scan(stones_hf, pos[3],
-                                                             kin.yaw_from_quat(quat[3])))
+    np.testing.assert_array_equal(
+        state.scan, em.height_scan(stones_hf, pos[3], kin.yaw_from_quat(quat[3]))
+    )
     a, b = _aggre_and_ideal(state, stones_hf, pos[3], quat[3], q)
     np.testing.assert_array_equal(a.valid, b.valid)
     np.testing.assert_array_equal(a.distance_m, b.distance_m)
@@ -501,14 +527,24 @@ def test_jit_equals_no_jit(stones_hf):
     pos, quat, q = _poses(stones_hf, 1, 5, aligned=False)
     pos, quat, q = pos[0], quat[0], q[0]
     yaw = kin.yaw_from_quat(quat)
-    np.testing.assert_allclose(em.height_scan(stones_hf, pos, yaw),
-                               jax.jit(em.height_scan)(stones_hf, pos, yaw), atol=1e-4)
-    for a, b in zip(sources.sensor_sites_in_scan_frame(quat, q),
-                    jax.jit(sources.sensor_sites_in_scan_frame)(quat, q), strict=True):
+    np.testing.assert_allclose(
+        em.height_scan(stones_hf, pos, yaw), jax.jit(em.height_scan)(stones_hf, pos, yaw), atol=1e-4
+    )
+    for a, b in zip(
+        sources.sensor_sites_in_scan_frame(quat, q),
+        jax.jit(sources.sensor_sites_in_scan_frame)(quat, q),
+        strict=True,
+    ):
         np.testing.assert_allclose(a, b, atol=1e-6)
     state = em.aggre_init(stones_hf, pos, quat)
-    args = (stones_hf, pos + jp.array([0.01, 0.0, 0.0]), quat, jp.array([0.5, 0.0, 0.0]),
-            jp.array([0.0, 0.0, 0.2]), DT)
+    args = (
+        stones_hf,
+        pos + jp.array([0.01, 0.0, 0.0]),
+        quat,
+        jp.array([0.5, 0.0, 0.0]),
+        jp.array([0.0, 0.0, 0.2]),
+        DT,
+    )
     s_eager = em.aggre_update(state, *args)
     s_jit = jax.jit(em.aggre_update, static_argnums=6)(state, *args)
     for a, b in zip(jax.tree.leaves(s_eager), jax.tree.leaves(s_jit), strict=True):
@@ -518,7 +554,8 @@ def test_jit_equals_no_jit(stones_hf):
 def test_bad_sensor_feet_and_source_raise(stones_hf):
     q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
     with pytest.raises(ValueError, match="sensor_feet"):
-        sources.readings_from_scan(TOF, jp.zeros((101, 101)), jp.array([1.0, 0, 0, 0]), q,
-                                   sensor_feet=(0, 1, 2, 7))
+        sources.readings_from_scan(
+            TOF, jp.zeros((101, 101)), jp.array([1.0, 0, 0, 0]), q, sensor_feet=(0, 1, 2, 7)
+        )
     with pytest.raises(ValueError, match="mock_ideal"):
         perception.check_source("mock_height")

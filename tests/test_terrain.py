@@ -476,15 +476,22 @@ def test_stage_specs_from_config():
 def test_eval_ensemble_spec():
     cfg = _terrain.get_section()
     ev = _eval.get_section()  # the paper's ensemble: 80 % stones (3 types), 20 % gaps, 90 %
-    e = make_eval_map_spec(cfg, ev.stone_types + ev.gap_types, (0.8 / 3,) * 3 + (0.2,),
-                           ev.difficulty_fraction, ev.num_levels, num_cols=10)
+    e = make_eval_map_spec(
+        cfg,
+        ev.stone_types + ev.gap_types,
+        (0.8 / 3,) * 3 + (0.2,),
+        ev.difficulty_fraction,
+        ev.num_levels,
+        num_cols=10,
+    )
     names = [TERRAIN_TYPES[t] for t in e.col_types]
     assert names.count("platform_gap") == 2 and len(names) == 10  # 20 % gaps, 80 % stones
     lo, hi = cfg.stage1_difficulty.grid_stones
     assert all(r == pytest.approx((lo + 0.9 * (hi - lo),) * 2) for r in e.col_difficulty)
     with pytest.raises(ValueError, match="'stairs'"):
-        make_eval_map_spec(cfg, types=("stairs",), weights=(1.0,), progress=0.9, num_levels=5,
-                           num_cols=10)
+        make_eval_map_spec(
+            cfg, types=("stairs",), weights=(1.0,), progress=0.9, num_levels=5, num_cols=10
+        )
 
 
 def test_allocate_columns():

@@ -144,9 +144,7 @@ class AnymalToFEnv(Env):
         """Starts an episode on a random tile at curriculum level drawn from the initial range."""
         return self._reset_first(rng, None)
 
-    def reset_perturbed(
-        self, rng: jax.Array, joint_offset_rad=None, odometry_level=None
-    ) -> State:
+    def reset_perturbed(self, rng: jax.Array, joint_offset_rad=None, odometry_level=None) -> State:
         """``reset(rng)`` with this env's evaluation perturbations given as (traced) values.
 
         The same draws as ``reset(rng)``; only the episode parameters ``joint_offset_rad`` (a
@@ -176,7 +174,9 @@ class AnymalToFEnv(Env):
         task: TaskState = state.info["task"]
         p = task.params
         rng, key_push, key_reset, key_obs = jax.random.split(task.rng, 4)
-        action = jp.clip(action, -float(self.cfg.env.clip_actions), float(self.cfg.env.clip_actions))
+        action = jp.clip(
+            action, -float(self.cfg.env.clip_actions), float(self.cfg.env.clip_actions)
+        )
         q_target = self._default_q + constants.ACTION_SCALE * action
         d = state.pipeline_state
         # Push: add a random horizontal base velocity every push interval.
@@ -207,7 +207,7 @@ class AnymalToFEnv(Env):
         fk, foot_vel = self._foot_kinematics(d)
         foot_pos = fk.foot_pos  # (4, 3)
         foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
-        contact = (foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m))
+        contact = foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m)
         contact = contact.astype(jp.float32)
         gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
         failed, knee_contact = self._failed(d, gravity, fk)
@@ -298,7 +298,9 @@ class AnymalToFEnv(Env):
             return kinematics.world_foot_kinematics(jp.concatenate([qpos[:7], q]), self.shank_scale)
 
         fk, dfk = jax.jvp(fk_world, (qpos[7:19],), (qvel[6:18],))
-        omega_w = kinematics.quat_to_mat(qpos[3:7]) @ qvel[3:6]  # free-joint ang. vel. is body-frame
+        omega_w = (
+            kinematics.quat_to_mat(qpos[3:7]) @ qvel[3:6]
+        )  # free-joint ang. vel. is body-frame
         lever = fk.foot_pos - qpos[0:3]
         return fk, qvel[0:3] + jp.cross(omega_w, lever) + dfk.foot_pos
 
@@ -364,9 +366,7 @@ class AnymalToFEnv(Env):
         """Physics state and task state of a fresh episode on tile (level, col) (no sensing)."""
         key_sg, key_par, key_pose, key_rng = jax.random.split(key, 4)
         spawn, goal = sample_spawn_goal(key_sg, self.tmap, level, col)
-        params = sample_episode_params(
-            key_par, self.cfg.env.randomization, self._push_interval
-        )
+        params = sample_episode_params(key_par, self.cfg.env.randomization, self._push_interval)
         # Initial pose: nominal stance, joint noise ~ U(+-init_joint_noise_rad) (wider in stage 2).
         kq, kr = jax.random.split(key_pose)
         jn = float(self.cfg.env.init_joint_noise_rad)

@@ -138,4 +138,6 @@ def check_scales(scales) -> None:
     if unknown:
         raise ValueError(f"unknown reward term(s) {unknown}; valid terms: {list(REWARD_TERMS)}")
     if missing:
-        raise ValueError(f"reward.scales is missing term(s) {missing}; valid terms: {list(REWARD_TERMS)}")
+        raise ValueError(
+            f"reward.scales is missing term(s) {missing}; valid terms: {list(REWARD_TERMS)}"
+        )

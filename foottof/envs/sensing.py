@@ -83,7 +83,9 @@ class Sensing:
         sites = tuple(cfg.sensor.sites)
         bad = [s for s in sites if s not in constants.TOF_SITES]
         if bad:
-            raise ValueError(f"sensor.sites {bad} unknown; valid sites: {list(constants.TOF_SITES)}")
+            raise ValueError(
+                f"sensor.sites {bad} unknown; valid sites: {list(constants.TOF_SITES)}"
+            )
         self.feet = tuple(constants.TOF_SITES.index(s) for s in sites)
         self._feet_idx = np.asarray(self.feet, np.int32)
         self.dt = constants.CONTROL_DT_S
@@ -132,7 +134,9 @@ class Sensing:
         tstate, obs = timing.reset(self.timing, self.bounds, self.model, key, reading)
         return SensingState(tof=tstate, emap=emap), self._sense(obs, true)
 
-    def step(self, state: SensingState, key, d, meas: Measurements, done) -> tuple[SensingState, Sense]:
+    def step(
+        self, state: SensingState, key, d, meas: Measurements, done
+    ) -> tuple[SensingState, Sense]:
         """Advance one control step; where ``done`` the pipeline restarts (the env auto-reset).
 
         ``d`` is the physics state *after* any auto-reset, so one ray cast serves both cases.
@@ -142,7 +146,13 @@ class Sensing:
         emap = state.emap
         if self.source == "mock_aggre":  # where done: a fresh map (= aggre_init), same pass
             emap = em.aggre_update(
-                state.emap, self.hfield, base_pos, base_quat, meas.lin_vel, meas.ang_vel, self.dt,
+                state.emap,
+                self.hfield,
+                base_pos,
+                base_quat,
+                meas.lin_vel,
+                meas.ang_vel,
+                self.dt,
                 reset=done,
             )
         true = self.true_reading(d)

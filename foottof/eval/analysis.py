@@ -15,8 +15,14 @@ from foottof.robot import kinematics
 from foottof.sensors import tof
 
 
-def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
-                   perturbation: str = "none", level: float = 0.0):
+def record_episode(
+    cfg,
+    source: str,
+    checkpoint: str | None,
+    key: jax.Array,
+    perturbation: str = "none",
+    level: float = 0.0,
+):
     """Runs one evaluation episode (deterministic policy) and records it.
 
     The env and policy come from ``harness.make_eval_env_and_policy`` (the robustness test
@@ -60,9 +66,17 @@ def record_episode(cfg, source: str, checkpoint: str | None, key: jax.Array,
             qpos = state.pipeline_state.qpos[0]
             fz = kinematics.world_foot_kinematics(qpos, shank).foot_pos[:, 2]
             o = state.obs["state"][0]  # actor obs: readings (F x Z), then validity (F x Z), ...
-            out = (obs_in, action[0], o[: nf * nz], o[nf * nz : 2 * nf * nz], fz, qpos,
-                   state.done[0], state.metrics["episode/success"][0],
-                   state.metrics["episode/failed"][0])
+            out = (
+                obs_in,
+                action[0],
+                o[: nf * nz],
+                o[nf * nz : 2 * nf * nz],
+                fz,
+                qpos,
+                state.done[0],
+                state.metrics["episode/success"][0],
+                state.metrics["episode/failed"][0],
+            )
             return (state, lstm, jp.zeros((1,), bool)), out
 
         init = (state, networks.init_carry(1), jp.ones((1,), bool))
@@ -118,8 +132,15 @@ def ray_segments(env, qpos) -> dict:
     return {"origins": np.asarray(origins), "ends": np.asarray(ends), "hit": np.asarray(hit)}
 
 
-def write_analysis(env, trace: dict, out_dir: str, tag: str, video_format: str = "mp4",
-                   video_stride: int = 2, progress=None) -> list[str]:
+def write_analysis(
+    env,
+    trace: dict,
+    out_dir: str,
+    tag: str,
+    video_format: str = "mp4",
+    video_stride: int = 2,
+    progress=None,
+) -> list[str]:
     """Writes one recorded episode: analysis PNG, trace .npz and the rollout video.
 
     Files (in ``out_dir``): ``analysis_<tag>.png`` (plots.analysis_png), ``episode_<tag>.npz``
@@ -149,8 +170,9 @@ def write_analysis(env, trace: dict, out_dir: str, tag: str, video_format: str =
         qpos = trace["qpos"]
         bar = progress(-(-len(qpos) // video_stride)) if progress else None
         try:
-            frames = video.render_rollout(env.mj_model, qpos, ray_segments(env, qpos),
-                                          video_stride, progress=bar)
+            frames = video.render_rollout(
+                env.mj_model, qpos, ray_segments(env, qpos), video_stride, progress=bar
+            )
         finally:
             if bar is not None:
                 bar.close()

@@ -52,11 +52,20 @@ def robustness_png(rows: list[dict]) -> bytes:
     if not full:
         plt, (fig, ax) = _figure(1, 1, figsize=(9, 2.5))
         ax.axis("off")
-        ax.text(0.5, 0.5, "no perturbation sweep in this folder\n" + note.replace("; ", "\n"),
-                ha="center", va="center", transform=ax.transAxes, color="0.3", fontsize=10)
+        ax.text(
+            0.5,
+            0.5,
+            "no perturbation sweep in this folder\n" + note.replace("; ", "\n"),
+            ha="center",
+            va="center",
+            transform=ax.transAxes,
+            color="0.3",
+            fontsize=10,
+        )
         return _png(plt, fig)
-    plt, (fig, axes) = _figure(1, len(full), figsize=(1.0 + 4.2 * len(full), 3.8), sharey=True,
-                               squeeze=False)
+    plt, (fig, axes) = _figure(
+        1, len(full), figsize=(1.0 + 4.2 * len(full), 3.8), sharey=True, squeeze=False
+    )
     axes = axes[0]
     sources = sorted({r["source"] for r in rows})
     colours = {s: f"C{i}" for i, s in enumerate(sources)}
@@ -76,10 +85,15 @@ def robustness_png(rows: list[dict]) -> bytes:
             dodge = (i - (len(sources) - 1) / 2) * 0.01 * span
             x = np.array([r["level"] for r in pts]) + dodge
             y = np.array([r["success_rate"] for r in pts])
-            err = np.array([[r["success_rate"] - r["ci_low"] for r in pts],
-                            [r["ci_high"] - r["success_rate"] for r in pts]])
-            ax.errorbar(x, y, yerr=np.maximum(err, 0), marker="o", capsize=3, label=s,
-                        color=colours[s])
+            err = np.array(
+                [
+                    [r["success_rate"] - r["ci_low"] for r in pts],
+                    [r["ci_high"] - r["success_rate"] for r in pts],
+                ]
+            )
+            ax.errorbar(
+                x, y, yerr=np.maximum(err, 0), marker="o", capsize=3, label=s, color=colours[s]
+            )
         ax.legend(fontsize=8)
     axes[0].set_ylabel("success rate")
     fig.tight_layout()
@@ -112,8 +126,14 @@ def analysis_png(trace: dict, dt: float) -> bytes:
     ax.set_title("C  per-foot mean ToF reading (valid zones)", loc="left")
     ax.legend(ncol=4, fontsize=8)
     ax = axes[1]
-    im = ax.imshow(masked[:, 0, :].T, aspect="auto", origin="lower", interpolation="nearest",
-                   extent=(t[0], t[-1] + dt, -0.5, tof.shape[2] - 0.5), cmap="viridis")
+    im = ax.imshow(
+        masked[:, 0, :].T,
+        aspect="auto",
+        origin="lower",
+        interpolation="nearest",
+        extent=(t[0], t[-1] + dt, -0.5, tof.shape[2] - 0.5),
+        cmap="viridis",
+    )
     fig.colorbar(im, ax=ax, label="reading [m]", pad=0.01)
     ax.set_ylabel("LF zone index")
     ax.set_title("D  LF zone readings (blank = invalid)", loc="left")

@@ -129,8 +129,11 @@ def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) 
     from foottof.eval.plots import robustness_png
 
     base = os.path.join(out_dir, result_basename(source_flag, perturbation))
-    paths = {"json": base + ".json", "csv": base + ".csv", "png": os.path.join(out_dir,
-                                                                                "robustness.png")}
+    paths = {
+        "json": base + ".json",
+        "csv": base + ".csv",
+        "png": os.path.join(out_dir, "robustness.png"),
+    }
     others = [p for p in glob.glob(os.path.join(out_dir, "results_*.json")) if p != paths["json"]]
     rows = list(doc["results"])
     seen = {(r["source"], r["perturbation"], r["level"]) for r in rows}
@@ -154,15 +157,24 @@ def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) 
     return paths
 
 
-def write_run(out_dir: str, source_flag: str, perturbation_flag: str | None, rows: list[dict],
-              checkpoint: str | None, episode_length_s: float) -> list[str]:
+def write_run(
+    out_dir: str,
+    source_flag: str,
+    perturbation_flag: str | None,
+    rows: list[dict],
+    checkpoint: str | None,
+    episode_length_s: float,
+) -> list[str]:
     """Writes the rows of one evaluate.py run (write_results); returns the paths written.
 
     One results file named by the --perturbation flag; without the flag (each source's default
     sweep) one file per perturbation that ran, so a later explicit run of it replaces it.
     """
-    names = [perturbation_flag] if perturbation_flag else list(
-        dict.fromkeys(r["perturbation"] for r in rows))
+    names = (
+        [perturbation_flag]
+        if perturbation_flag
+        else list(dict.fromkeys(r["perturbation"] for r in rows))
+    )
     paths = []
     for name in names:
         sel = rows if perturbation_flag else [r for r in rows if r["perturbation"] == name]

@@ -232,13 +232,16 @@ def sweep_plan(
       levels: the --levels flag (None or empty: the c.eval levels).
     """
     if perturbation == "all" and levels:
-        raise ValueError("--levels cannot be given with --perturbation all (each sweep "
-                         "uses its c.eval levels)")
+        raise ValueError(
+            "--levels cannot be given with --perturbation all (each sweep uses its c.eval levels)"
+        )
     if perturbation == "none" and levels:
         raise ValueError(f"--levels {levels} given with --perturbation none")
     if perturbation is None and levels and len({HEADLINE_SWEEPS[s] for s in sources}) > 1:
-        raise ValueError(f"--levels {levels} needs --perturbation here: the default sweeps of "
-                         f"{list(sources)} differ ({HEADLINE_SWEEPS})")
+        raise ValueError(
+            f"--levels {levels} needs --perturbation here: the default sweeps of "
+            f"{list(sources)} differ ({HEADLINE_SWEEPS})"
+        )
     plan = []
     for s in sources:
         if perturbation is None:

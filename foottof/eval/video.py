@@ -42,7 +42,9 @@ def _gl_context(width: int, height: int):
             return ctx
         except Exception as e:  # noqa: BLE001 - every failure is reported below
             errors.append(f"{name}: {type(e).__name__}: {e}")
-    tried = "; ".join(errors) if errors else f"none of the libraries {list(BACKENDS.values())} found"
+    tried = (
+        "; ".join(errors) if errors else f"none of the libraries {list(BACKENDS.values())} found"
+    )
     raise RuntimeError(
         f"no headless OpenGL for MuJoCo's offscreen renderer ({tried}). Install Mesa's EGL or "
         "OSMesa (`make render-deps`, i.e. `bash .ci/render-deps.sh`) and retry."
@@ -58,8 +60,15 @@ class RolloutRenderer:
       distance_m, azimuth_deg, elevation_deg: the free camera, which follows the base.
     """
 
-    def __init__(self, m, width: int = 640, height: int = 480, distance_m: float = 2.6,
-                 azimuth_deg: float = 130.0, elevation_deg: float = -22.0):
+    def __init__(
+        self,
+        m,
+        width: int = 640,
+        height: int = 480,
+        distance_m: float = 2.6,
+        azimuth_deg: float = 130.0,
+        elevation_deg: float = -22.0,
+    ):
         import mujoco
 
         if width < 16 or height < 16:
@@ -113,16 +122,28 @@ class RolloutRenderer:
 
     def _add_segment(self, a, b, rgba) -> None:
         mj, g = self._mj, self._next_geom()
-        mj.mjv_initGeom(g, mj.mjtGeom.mjGEOM_LINE, np.zeros(3), np.zeros(3), np.eye(3).ravel(),
-                        np.asarray(rgba, np.float32))
-        mj.mjv_connector(g, mj.mjtGeom.mjGEOM_LINE, 2.0, np.asarray(a, np.float64),
-                         np.asarray(b, np.float64))
+        mj.mjv_initGeom(
+            g,
+            mj.mjtGeom.mjGEOM_LINE,
+            np.zeros(3),
+            np.zeros(3),
+            np.eye(3).ravel(),
+            np.asarray(rgba, np.float32),
+        )
+        mj.mjv_connector(
+            g, mj.mjtGeom.mjGEOM_LINE, 2.0, np.asarray(a, np.float64), np.asarray(b, np.float64)
+        )
 
     def _add_point(self, p, rgba) -> None:
         mj = self._mj
-        mj.mjv_initGeom(self._next_geom(), mj.mjtGeom.mjGEOM_SPHERE,
-                        np.full(3, HIT_POINT_RADIUS_M), np.asarray(p, np.float64),
-                        np.eye(3).ravel(), np.asarray(rgba, np.float32))
+        mj.mjv_initGeom(
+            self._next_geom(),
+            mj.mjtGeom.mjGEOM_SPHERE,
+            np.full(3, HIT_POINT_RADIUS_M),
+            np.asarray(p, np.float64),
+            np.eye(3).ravel(),
+            np.asarray(rgba, np.float32),
+        )
 
     def render(self, qpos, origins=None, ends=None, hit=None) -> np.ndarray:
         """One frame (height, width, 3) uint8 of the state ``qpos`` (nq,).
@@ -139,8 +160,9 @@ class RolloutRenderer:
         self.d.qpos[:] = qpos
         mj.mj_kinematics(self.m, self.d)
         self.camera.lookat[:] = self.d.qpos[0:3]
-        mj.mjv_updateScene(self.m, self.d, self._opt, self._pert, self.camera,
-                           mj.mjtCatBit.mjCAT_ALL, self.scene)
+        mj.mjv_updateScene(
+            self.m, self.d, self._opt, self._pert, self.camera, mj.mjtCatBit.mjCAT_ALL, self.scene
+        )
         if origins is not None:
             for f in range(len(origins)):
                 for r in range(ends.shape[1]):
@@ -154,8 +176,15 @@ class RolloutRenderer:
         return np.flipud(rgb)
 
 
-def render_rollout(m, qpos, rays: dict | None = None, stride: int = 1, width: int = 640,
-                   height: int = 480, progress=None) -> np.ndarray:
+def render_rollout(
+    m,
+    qpos,
+    rays: dict | None = None,
+    stride: int = 1,
+    width: int = 640,
+    height: int = 480,
+    progress=None,
+) -> np.ndarray:
     """Frames (N, height, width, 3) uint8 of every ``stride``-th state of ``qpos`` (T, nq).
 
     Args:
@@ -176,8 +205,9 @@ def render_rollout(m, qpos, rays: dict | None = None, stride: int = 1, width: in
             if rays is None:
                 frames.append(r.render(qpos[t]))
             else:
-                frames.append(r.render(qpos[t], rays["origins"][t], rays["ends"][t],
-                                       rays["hit"][t]))
+                frames.append(
+                    r.render(qpos[t], rays["origins"][t], rays["ends"][t], rays["hit"][t])
+                )
             if progress is not None:
                 progress.update(1)
     return np.stack(frames)
@@ -208,8 +238,14 @@ def write_video(path: str, frames: np.ndarray, fps: float) -> str:
     tmp = f"{path[: -len(ext) - 1]}.partial.{ext}"
     try:
         if ext == "mp4":
-            with imageio.get_writer(tmp, fps=fps, codec="libx264", quality=7,
-                                    macro_block_size=1, ffmpeg_log_level="error") as w:
+            with imageio.get_writer(
+                tmp,
+                fps=fps,
+                codec="libx264",
+                quality=7,
+                macro_block_size=1,
+                ffmpeg_log_level="error",
+            ) as w:
                 for f in frames:
                     w.append_data(f)
         else:

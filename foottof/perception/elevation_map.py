@@ -156,8 +156,9 @@ def _in_view(r_xy, h_rel, tilt, cameras, see_all: bool) -> jax.Array:
     return cam_lib.visible(p_base, cameras)
 
 
-def _camera_update(state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all,
-                   reset=False):
+def _camera_update(
+    state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all, reset=False
+):
     """Overwrite stored vertices seen by a camera with ground truth (placed via pose_est);
     where ``reset`` (traced bool) every vertex counts as seen (aggre_init's full prior)."""
     r_xy = _odom_to_robot(_map_xy(state.center_idx), state.pose_est)  # where the robot thinks

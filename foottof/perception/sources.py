@@ -14,9 +14,7 @@ from foottof.terrain.heightfield import Heightfield
 
 def _check_sensor_feet(spec: tof.ToFSpec, sensor_feet) -> tuple[int, ...]:
     feet = tuple(range(constants.NUM_FEET)) if sensor_feet is None else tuple(sensor_feet)
-    if len(feet) != spec.num_sensors or any(
-        not 0 <= f < constants.NUM_FEET for f in feet
-    ):
+    if len(feet) != spec.num_sensors or any(not 0 <= f < constants.NUM_FEET for f in feet):
         raise ValueError(
             f"sensor_feet={sensor_feet!r} must give one foot index in [0, {constants.NUM_FEET}) "
             f"(order {constants.FEET}) per sensor (num_sensors={spec.num_sensors})"

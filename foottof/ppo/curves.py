@@ -118,7 +118,9 @@ def write_curve(run_dir: str, window: int = 20, out_prefix: str | None = None) -
     for i in range(len(curve["env_steps"])):
         w.writerow([f"{curve[k][i]:.6g}" for k in keys])
     _atomic_write(prefix + ".csv", buf.getvalue().encode())
-    title = f"{os.path.basename(os.path.normpath(run_dir))}: moving average over {window} iterations"
+    title = (
+        f"{os.path.basename(os.path.normpath(run_dir))}: moving average over {window} iterations"
+    )
     _atomic_write(prefix + ".png", curve_png(curve, title))
     return prefix + ".csv", prefix + ".png"
 

@@ -24,6 +24,7 @@ from foottof.terrain.tiles import (
 # Layout of the last axis of TerrainMap.spawn and of sample_spawn_goal's spawn.
 SPAWN_X, SPAWN_Y, SPAWN_YAW, SPAWN_Z = 0, 1, 2, 3
 
+
 def allocate_columns(weights: Mapping[str, float], num_cols: int) -> tuple[int, ...]:
     """Splits ``num_cols`` tile columns among terrain types in proportion to ``weights``.
 

@@ -9,6 +9,7 @@ def get_section() -> ml_collections.ConfigDict:
     r.guidance_max_speed_ms = 1.0  # dense guidance saturates at this speed toward the goal [m/s]
     r.stall_speed_ms = 0.1  # below this speed while far from the goal counts as stalling [m/s]
     r.stall_grace_s = 2.0  # no stall penalty during the first seconds of an episode [s]
+    r.jump_grace_s = 0.2  # no jump penalty while the spawn drop lands [s]
     r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
     s = ml_collections.ConfigDict()
     s.reach = 10.0  # sparse: +1 at the last step if within success_radius_m of the goal

@@ -250,6 +250,7 @@ RULES = {
     "reward.guidance_max_speed_ms": _pos,
     "reward.stall_speed_ms": _nonneg,
     "reward.stall_grace_s": _nonneg,
+    "reward.jump_grace_s": _nonneg,
     "reward.only_positive": _bool,
     "reward.scales.*": _num(),
     # ppo, network, train

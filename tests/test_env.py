@@ -282,6 +282,7 @@ def test_reward_terms_hand_checked():
     # Jump: all four feet off the ground -> 1.
     assert _terms(foot_contact=jp.zeros(4))["jump"] == 1.0
     assert _terms(foot_contact=jp.array([0.0, 0.0, 0.0, 1.0]))["jump"] == 0.0
+    assert _terms(foot_contact=jp.zeros(4), time_s=jp.asarray(rcfg.jump_grace_s / 2))["jump"] == 0.0
     # Posture: only within the success radius: one joint 0.2 rad off -> 0.04.
     q = jp.asarray(constants.DEFAULT_POSE).at[2].add(0.2)
     assert _terms(q=q, goal_xy=jp.array([0.3, 0.0]))["posture"] == pytest.approx(0.04)

@@ -95,7 +95,8 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
         "foot_slip": jp.sum(x.foot_contact * foot_speed_sq),
         "orientation": jp.sum(jp.square(x.projected_gravity[:2])),
         "stall": stalling.astype(jp.float32),
-        "jump": jp.all(x.foot_contact < 0.5).astype(jp.float32),
+        # all feet off the ground, once the spawn drop (env.spawn_height_offset_m) has landed
+        "jump": (jp.all(x.foot_contact < 0.5) & (x.time_s > rcfg.jump_grace_s)).astype(jp.float32),
         "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
         "collision": jp.sum(x.knee_contact),
     }

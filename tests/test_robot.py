@@ -78,7 +78,7 @@ def test_names_and_ordering(m_plane):
 
 
 def test_total_mass(m_plane):
-    # 26.3631 + 4 * (0.36586 + 5.13220 + 0.79598) = 51.53926 kg (anymal.md §1, [D] bare)
+    # 26.3631 + 4 * (0.36586 + 5.13220 + 0.79598) = 51.53926 kg (ANYmal-D URDF, ANYbotics/anymal_d_simple_description, links lumped, no payload)
     assert float(np.sum(m_plane.body_mass)) == pytest.approx(51.53926, abs=1e-6)
     assert mujoco.mj_getTotalmass(m_plane) == pytest.approx(51.539, abs=1e-3)
 
@@ -216,7 +216,7 @@ def test_tof_axis_convention_at_zero(tilt):
 
 
 def test_nominal_stance_height(m_plane):
-    """Keyframe 'standing': feet just touch z = 0 at base z ~ 0.589 m (anymal.md §6)."""
+    """Keyframe 'standing': feet just touch z = 0 at base z ~ 0.589 m (FK of the ANYmal-D URDF in the IsaacLab stance)."""
     m = m_plane
     d = mujoco.MjData(m)
     mujoco.mj_resetDataKeyframe(m, d, m.key("standing").id)
@@ -227,7 +227,7 @@ def test_nominal_stance_height(m_plane):
     mujoco.mj_kinematics(m, d)
     feet = d.geom_xpos[_ids(m, mujoco.mjtObj.mjOBJ_GEOM, constants.FOOT_GEOMS)]
     np.testing.assert_allclose(feet[:, 2], FOOT_R, atol=1e-6)  # all four touch, none below
-    # foot-sphere centres in the 0.4/0.8 stance: (+-0.4951, +-0.3096) (anymal.md §6)
+    # foot-sphere centres in the 0.4/0.8 stance: (+-0.4951, +-0.3096) (FK of the ANYmal-D URDF)
     np.testing.assert_allclose(np.abs(feet[:, :2]), [[0.4951, 0.3096]] * 4, atol=1e-4)
     # 1 mm lower: MuJoCo's collision finds exactly the four feet touching the ground
     d.qpos[2] -= 0.001

@@ -28,7 +28,7 @@ def torque_bounds(
 ) -> tuple[jax.Array, jax.Array]:
     """Lower and upper joint-torque bounds [N m] at joint speed ``qd`` [rad/s].
 
-    DC-motor model (IsaacLab ``DCMotor``, anymal.md §7): ``upper = clip(sat * (1 - qd / v_lim),
+    DC-motor model (IsaacLab ``isaaclab.actuators.DCMotor``): ``upper = clip(sat * (1 - qd / v_lim),
     0, tau_lim)``, ``lower = clip(sat * (-1 - qd / v_lim), -tau_lim, 0)``. The full ``tau_lim``
     is available while ``|qd| <= v_lim * (1 - tau_lim / sat)`` (2.83 rad/s for 80 / 120 / 8.5);
     the torque that drives the joint further in its direction of motion falls linearly to 0 at

@@ -11,7 +11,8 @@ from foottof import constants
 from foottof.robot import kinematics as kin
 from foottof.terrain.heightfield import Heightfield, hfield_xml, write_to_mjmodel
 
-# Inertials, anymal.md §2-3 ([D] S6): mass [kg], COM [m] rel. to the body origin, inertia about the
+# Inertials of the ANYmal-D URDF (ANYbotics/anymal_d_simple_description urdf/anymal.urdf, links
+# joined by fixed joints lumped): mass [kg], COM [m] rel. to the body origin, inertia about the
 # COM in base-aligned axes (Ixx, Iyy, Izz, Ixy, Ixz, Iyz) [kg m^2]. Leg figures are for LF.
 BASE_INERTIAL = (
     26.3631,
@@ -37,7 +38,7 @@ LEG_INERTIALS = {
 }
 TOTAL_MASS_KG = BASE_INERTIAL[0] + 4 * sum(v[0] for v in LEG_INERTIALS.values())  # 51.539 kg
 
-# Joint ranges, anymal.md §5 [rad]: HAA of the left legs (mirrored for right legs); HFE/KFE +-3 pi.
+# Joint ranges of the ANYmal-D URDF [rad]: HAA of the left legs (mirrored for right legs); HFE/KFE +-3 pi.
 HAA_RANGE_LEFT = (-0.7854, 0.6109)
 FLEX_RANGE = (-9.4248, 9.4248)
 

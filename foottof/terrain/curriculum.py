@@ -38,8 +38,9 @@ def update_levels(
     """New curriculum levels of envs whose episode ended (others keep theirs).
 
     An env that reached its goal, or covered at least ``up_progress_frac`` of the distance to it
-    (legged_gym promotes on distance walked, not on full success), moves up one level; one that solved the top level goes to a random
-    level ~ U{0, ..., num_levels - 1}; one that did not reach the goal and covered less than
+    (legged_gym promotes on distance walked, not on full success), moves up one level; one that
+    solved the top level goes to a random level ~ U{0, ..., num_levels - 1}; one that did not reach
+    the goal and covered less than
     ``down_progress_frac`` of the distance moves down one level (not below 0); any other stays.
 
     Args:

@@ -1,5 +1,6 @@
 """Tests of the LSTM PPO trainer: GAE, memory task, Brax env, checkpoints, resume, export."""
 
+import csv
 import os
 
 import jax
@@ -248,6 +249,36 @@ def test_resume_equals_straight_run(tmp_path, capsys):
     assert "compiled in" in out and "it 4/4" in out and "success" in out and "reward: recall" in out
     with pytest.raises(FileExistsError):
         runner.run(tiny_cfg(num_iterations=4), env, str(run_b))
+
+
+def test_resume_trims_rows_after_the_checkpoint_and_sums_wall_time(tmp_path):
+    """A run killed after its last checkpoint logged rows the resume will redo: they go, and the
+    cumulative wall-clock column carries on from the checkpoint's row."""
+    env = MEMORY_ENV
+    run = tmp_path / "run"
+    runner.run(tiny_cfg(num_iterations=3, checkpoint_every=2), env, str(run))
+    (run / "checkpoints" / "3").rename(tmp_path / "gone")  # as if killed before saving it
+    metrics = run / "metrics.csv"
+    before = list(csv.DictReader(metrics.open()))
+    assert [r["iteration"] for r in before] == ["1", "2", "3"]
+    runner.run(tiny_cfg(num_iterations=4, checkpoint_every=2), env, str(run), resume=True)
+    rows = list(csv.DictReader(metrics.open()))
+    assert [r["iteration"] for r in rows] == ["1", "2", "3", "4"]
+    wall = [float(r[runner.WALL_COLUMN]) for r in rows]
+    assert wall[:2] == [float(r[runner.WALL_COLUMN]) for r in before[:2]]
+    assert all(b > a for a, b in zip(wall[:-1], wall[1:], strict=True)), wall
+    assert wall[2] > wall[1] + float(rows[2]["time/iteration_s"]) / 3600.0 * 0.99
+
+
+def test_trim_metrics_adds_the_wall_column_to_old_files(tmp_path):
+    (tmp_path / "metrics.csv").write_text(
+        "iteration,env_steps,time/iteration_s,loss\n1,8,10.0,0.5\n2,16,20.0,0.4\n3,24,5.0,0.3\n"
+    )
+    assert runner.trim_metrics(str(tmp_path), 2) == pytest.approx(30.0)
+    rows = list(csv.DictReader((tmp_path / "metrics.csv").open()))
+    assert list(rows[0]) == ["iteration", "env_steps", "time/iteration_s", "time/total_h", "loss"]
+    assert [float(r["time/total_h"]) * 3600 for r in rows] == pytest.approx([10.0, 30.0])
+    assert runner.trim_metrics(str(tmp_path / "nothing"), 5) == 0.0
 
 
 class _NanAfter:

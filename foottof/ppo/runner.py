@@ -143,6 +143,44 @@ def _write_config(cfg: ml_collections.ConfigDict, run_dir: str) -> None:
         f.write(cfg.to_yaml())
 
 
+WALL_COLUMN = "time/total_h"  # cumulative wall-clock hours of the run, over all resumed chunks
+
+
+def trim_metrics(run_dir: str, iteration: int) -> float:
+    """Makes metrics.csv end at ``iteration`` (the checkpoint a resume starts from).
+
+    Rows logged after the last checkpoint of a killed run are dropped, so the resumed run's rows
+    follow on without repeated iterations. A file written before the cumulative wall-clock
+    column existed gets it (summed from ``time/iteration_s``). Atomic rewrite.
+
+    Returns:
+      Cumulative wall-clock seconds of the run up to ``iteration`` (0.0 without a metrics.csv).
+    """
+    path = os.path.join(run_dir, "metrics.csv")
+    if not os.path.exists(path):
+        return 0.0
+    with open(path, newline="") as f:
+        reader = csv.DictReader(f)
+        fields = list(reader.fieldnames or [])
+        rows = [r for r in reader if r.get("iteration") and int(r["iteration"]) <= iteration]
+    if not fields:
+        return 0.0
+    if WALL_COLUMN not in fields:
+        at = fields.index("time/iteration_s") + 1 if "time/iteration_s" in fields else len(fields)
+        fields.insert(at, WALL_COLUMN)
+        total_s = 0.0
+        for r in rows:
+            total_s += float(r.get("time/iteration_s") or 0.0)
+            r[WALL_COLUMN] = repr(total_s / 3600.0)
+    tmp = path + ".tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, path)
+    return float(rows[-1][WALL_COLUMN]) * 3600.0 if rows else 0.0
+
+
 def _alive(state) -> bool:
     return not any(getattr(x, "is_deleted", lambda: False)() for x in jax.tree.leaves(state))
 
@@ -243,8 +281,9 @@ def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.
         )
         state = state.replace(params=params, normalizer=normalizer)
         print(f"[runner] params and normalizer initialized from {init_from}")
+    wall_before_s = trim_metrics(run_dir, int(state.iteration)) if (resume and main) else 0.0
 
-    t0 = time.time()
+    t0 = time.time()  # wall clock of this chunk starts before the compile
     if iteration is None:
         iteration = trainer.iteration.lower(state).compile()
         _CACHE[_cache_key(env, cfg)] = (env, trainer, iteration)
@@ -282,6 +321,7 @@ def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.
                 "iteration": it,
                 "env_steps": train_lib.env_steps(it, trainer),
                 "time/iteration_s": dt,
+                WALL_COLUMN: (wall_before_s + time.time() - t0) / 3600.0,
                 "time/compile_s": compile_s,
                 "training/sps": sps,
                 **metrics,

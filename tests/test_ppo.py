@@ -279,6 +279,17 @@ def test_trim_metrics_adds_the_wall_column_to_old_files(tmp_path):
     assert list(rows[0]) == ["iteration", "env_steps", "time/iteration_s", "time/total_h", "loss"]
     assert [float(r["time/total_h"]) * 3600 for r in rows] == pytest.approx([10.0, 30.0])
     assert runner.trim_metrics(str(tmp_path / "nothing"), 5) == 0.0
+    # A file from before the trim: a resumed chunk repeats iterations 2 and 3; the later rows win.
+    (tmp_path / "metrics.csv").write_text(
+        "iteration,time/iteration_s\n1,1.0\n2,2.0\n3,3.0\n2,20.0\n3,30.0\n4,40.0\n"
+    )
+    assert runner.trim_metrics(str(tmp_path), 3) == pytest.approx(51.0)
+    rows = list(csv.DictReader((tmp_path / "metrics.csv").open()))
+    assert [(r["iteration"], r["time/iteration_s"]) for r in rows] == [
+        ("1", "1.0"),
+        ("2", "20.0"),
+        ("3", "30.0"),
+    ]
 
 
 class _NanAfter:

@@ -150,7 +150,8 @@ def trim_metrics(run_dir: str, iteration: int) -> float:
     """Makes metrics.csv end at ``iteration`` (the checkpoint a resume starts from).
 
     Rows logged after the last checkpoint of a killed run are dropped, so the resumed run's rows
-    follow on without repeated iterations. A file written before the cumulative wall-clock
+    follow on without repeated iterations (in a file that already repeats iterations, from before
+    this trim existed, the later rows win). A file written before the cumulative wall-clock
     column existed gets it (summed from ``time/iteration_s``). Atomic rewrite.
 
     Returns:
@@ -162,7 +163,14 @@ def trim_metrics(run_dir: str, iteration: int) -> float:
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
         fields = list(reader.fieldnames or [])
-        rows = [r for r in reader if r.get("iteration") and int(r["iteration"]) <= iteration]
+        rows = []
+        for r in reader:  # a row repeating an earlier iteration starts a resumed chunk: it wins
+            if not r.get("iteration"):
+                continue
+            while rows and int(rows[-1]["iteration"]) >= int(r["iteration"]):
+                rows.pop()
+            rows.append(r)
+    rows = [r for r in rows if int(r["iteration"]) <= iteration]
     if not fields:
         return 0.0
     if WALL_COLUMN not in fields:

@@ -6,6 +6,8 @@ import math
 
 import jax
 import jax.numpy as jp
+import numpy as np
+from jax.custom_batching import custom_vmap
 
 from foottof.terrain.heightfield import Heightfield
 
@@ -76,13 +78,19 @@ _FACE_NORMALS = (
 )
 
 
-def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int, with_normal: bool):
-    """Distance and outward unit normal of the first hit of one ray (inf if none)."""
-    nrow, ncol, cell = hf.nrow, hf.ncol, hf.cell_m
-    rx, ry = hf.half_extents_m
+def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: int):
+    """First surface-triangle hit of one ray among strips ``first .. first + count - 1``.
+
+    Strips are visited in the order the ray crosses them, so a hit in strip s is closer than any
+    hit in a later strip (ties keep the earlier strip).
+
+    Returns:
+      t: hit distance [m] (inf if none); g: (2,) (dz/dp, dz/dq) of the hit triangle [m/cell];
+      more: whether strip ``first + count`` could still hold a hit (the walk is unfinished).
+    """
+    nrow, ncol = hf.nrow, hf.ncol
+    cell = hf.cell_m
     xlo, ylo = hf.x0_m, hf.y0_m
-    xhi, yhi = xlo + 2.0 * rx, ylo + 2.0 * ry
-    zf, ztop, zbase = hf.z_floor_m, hf.z_floor_m + hf.z_range_m, hf.z_floor_m - hf.base_m
     dt = o.dtype
 
     # --- surface triangles: walk the strips of the dominant horizontal axis -------------------
@@ -179,8 +187,29 @@ def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int, 
         return (jp.where(closer, t4[i], best_t), jp.where(closer, g4[i], best_g)), None
 
     (t_tri, g_best), _ = jax.lax.scan(
-        scan_body, (jp.asarray(jp.inf, dt), jp.zeros((2,), dt)), jp.arange(n_strips)
+        scan_body, (jp.asarray(jp.inf, dt), jp.zeros((2,), dt)), jp.arange(first, first + count)
     )
+    # Could a strip after these hold a hit? Only if none was found, the ray moves along p, the
+    # next strip starts within range and lies inside the grid.
+    nxt = first + count
+    step_dir = jp.where(dp < 0.0, -1, 1)
+    k = jp.floor(p0).astype(jp.int32) + step_dir * nxt
+    t_next = (jp.where(dp < 0.0, k + 1, k).astype(dt) - p0) / jp.where(dp != 0.0, dp, 1.0)
+    past_grid = jp.where(dp < 0.0, k < 0, k > n_p - 2)  # and moving away: never comes back
+    more = ~jp.isfinite(t_tri) & (dp != 0.0) & (t_next <= max_range_m) & ~past_grid
+    return t_tri, g_best, more
+
+
+def _finish(h_flat, hf: Heightfield, o, d, t_tri, g_best, max_range_m: float, with_normal: bool):
+    """Distance and outward unit normal of the first hit of one ray (inf if none), from the
+    surface walk's result and MuJoCo's boxes."""
+    nrow, ncol, cell = hf.nrow, hf.ncol, hf.cell_m
+    rx, ry = hf.half_extents_m
+    xlo, ylo = hf.x0_m, hf.y0_m
+    xhi, yhi = xlo + 2.0 * rx, ylo + 2.0 * ry
+    zf, ztop, zbase = hf.z_floor_m, hf.z_floor_m + hf.z_range_m, hf.z_floor_m - hf.base_m
+    dt = o.dtype
+    swap = jp.abs(d[1] / cell) > jp.abs(d[0] / cell)  # as in _walk: g is in its (p, q) axes
     if with_normal:
         gp, gq = g_best[0], g_best[1]
         dzdx, dzdy = jp.where(swap, gq, gp) / cell, jp.where(swap, gp, gq) / cell
@@ -223,7 +252,83 @@ def _cast_one(h_flat, hf: Heightfield, o, d, max_range_m: float, n_strips: int, 
     return t_hit, normals[i_c]
 
 
-def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool):
+FIRST_STRIPS = 6  # strips every ray walks before the unfinished rays are gathered
+CHUNK_FRACTION = 0.2  # unfinished rays walked on per round, as a fraction of all rays
+
+
+def _surface_full(h_flat, meta: Heightfield, origins, unit, r: float, n_strips: int):
+    """Every ray walks all ``n_strips`` strips (the reference the adaptive walk must equal)."""
+    t, g, _ = jax.vmap(lambda o, d: _walk(h_flat, meta, o, d, r, 0, n_strips))(origins, unit)
+    return t, g
+
+
+def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, first: int, chunk):
+    """The same result as :func:`_surface_full`, with less work: every ray walks its first
+    ``first`` strips; the rays still unfinished (no hit yet, more strips within range and grid)
+    are gathered ``chunk`` at a time and walk the rest, until none is left.
+
+    Most ToF rays hit within a few strips of the foot (on the evaluation ensemble: 87 % within 6
+    of the 27 strips of a 1 m ray, 95 % within 12), so this is several times fewer strip tests
+    than walking all strips for every ray (ToF rays of 256 envs: 2.7-4x faster, bench/NOTES.md). Exact: strips are crossed in order, so a hit found
+    in an early strip is the first hit (see :func:`_walk`).
+    """
+    first = min(first, n_strips)
+    walk = lambda s0, count: jax.vmap(  # noqa: E731
+        lambda o, d: _walk(h_flat, meta, o, d, r, s0, count)
+    )
+    t, g, more = walk(0, first)(origins, unit)
+    rest = n_strips - first
+    n = origins.shape[0]
+    if rest == 0 or n == 0:
+        return t, g
+    m = max(1, min(n, int(chunk)))
+
+    def body(c):
+        t, g, more = c
+        idx = jp.nonzero(more, size=m, fill_value=n)[0]  # n = out of bounds: dropped below
+        o = jp.take(origins, idx, axis=0, mode="clip")
+        d = jp.take(unit, idx, axis=0, mode="clip")
+        t2, g2, _ = walk(first, rest)(o, d)
+        return (
+            t.at[idx].set(t2, mode="drop"),
+            g.at[idx].set(g2, mode="drop"),
+            more.at[idx].set(False, mode="drop"),
+        )
+
+    t, g, _ = jax.lax.while_loop(lambda c: jp.any(c[2]), body, (t, g, more))
+    return t, g
+
+
+def _surface_fn(meta: Heightfield, r: float, n_strips: int):
+    """Surface hits ``(h_flat, origins (N, 3), unit (N, 3)) -> t (N,), g (N, 2)``.
+
+    Under ``jax.vmap`` (e.g. over envs) the rays of all batch elements are walked as one set
+    (``custom_vmap``), so the unfinished rays of the whole batch share the rounds of the
+    adaptive walk instead of every env paying for the slowest one.
+    """
+
+    @custom_vmap
+    def surface(h_flat, origins, unit):
+        chunk = math.ceil(CHUNK_FRACTION * origins.shape[0])
+        return _surface_adaptive(h_flat, meta, origins, unit, r, n_strips, FIRST_STRIPS, chunk)
+
+    @surface.def_vmap
+    def _rule(axis_size, in_batched, h_flat, origins, unit):
+        h_b, o_b, u_b = in_batched
+        if h_b:  # a terrain per batch element: no rays to share, walk all strips
+            full = lambda h, o, d: _surface_full(h, meta, o, d, r, n_strips)  # noqa: E731
+            axes = (0, 0 if o_b else None, 0 if u_b else None)
+            return jax.vmap(full, in_axes=axes)(h_flat, origins, unit), (True, True)
+        n = origins.shape[1] if o_b else origins.shape[0]
+        o = jp.broadcast_to(origins, (axis_size, n, 3)).reshape(-1, 3)
+        d = jp.broadcast_to(unit, (axis_size, n, 3)).reshape(-1, 3)
+        t, g = surface(h_flat, o, d)  # itself: an outer vmap batches this call in turn
+        return (t.reshape(axis_size, n), g.reshape(axis_size, n, 2)), (True, True)
+
+    return surface
+
+
+def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool, adaptive=True):
     r = _check_range(max_range)
     origins = jp.asarray(origins)
     directions = jp.asarray(directions)
@@ -239,8 +344,14 @@ def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool
     unit = directions / jp.where(norm > 0.0, norm, 1.0)
     h_flat = hfield.clipped().heights.astype(dt).reshape(-1)
     n_strips = num_strips(hfield, r)
-    t, n = jax.vmap(lambda o, d: _cast_one(h_flat, hfield, o, d, r, n_strips, with_normal))(
-        origins, unit
+    # Static geometry only (heights may be traced: they travel as h_flat).
+    meta = hfield.replace(heights=np.broadcast_to(np.float32(0.0), hfield.heights.shape))
+    if adaptive:
+        t_tri, g = _surface_fn(meta, r, n_strips)(h_flat, origins, unit)
+    else:
+        t_tri, g = _surface_full(h_flat, meta, origins, unit, r, n_strips)
+    t, n = jax.vmap(lambda o, d, tt, gg: _finish(h_flat, meta, o, d, tt, gg, r, with_normal))(
+        origins, unit, t_tri, g
     )
     hit = jp.isfinite(t) & (norm[:, 0] > 0.0)
     return jp.where(hit, t, MISS), jp.where(hit[:, None], n, 0.0)
@@ -260,7 +371,10 @@ def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) 
     rotated (the ``Heightfield`` convention).
 
     jit- and vmap-able; ``max_range`` is static (it sets the number of strips,
-    ``num_strips(hfield, max_range)``; cost is linear in it).
+    ``num_strips(hfield, max_range)``). Each ray walks the strips in order and stops at its first
+    hit: every ray walks ``FIRST_STRIPS``, the unfinished ones walk on in gathered chunks, and
+    under ``vmap`` the rays of all batch elements are walked together (``custom_vmap``), so the
+    cost follows where the rays actually hit rather than ``max_range``.
 
     Args:
       hfield: terrain; heights outside the representable range are clipped like MuJoCo does.

@@ -196,6 +196,8 @@ def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: 
     k = jp.floor(p0).astype(jp.int32) + step_dir * nxt
     t_next = (jp.where(dp < 0.0, k + 1, k).astype(dt) - p0) / jp.where(dp != 0.0, dp, 1.0)
     past_grid = jp.where(dp < 0.0, k < 0, k > n_p - 2)  # and moving away: never comes back
+    if nxt == 0:  # nothing walked yet: strip 0 (the origin's, the only one of a vertical ray)
+        return t_tri, g_best, jp.ones((), bool)
     more = ~jp.isfinite(t_tri) & (dp != 0.0) & (t_next <= max_range_m) & ~past_grid
     return t_tri, g_best, more
 

@@ -73,34 +73,6 @@ def test_shapes_and_no_nan_on_every_terrain(env, fns):
     assert dones > 0  # random actions end episodes (falls) and they auto-reset
 
 
-def _gap_xy(env, level=0):
-    """World xy of the middle of the widest pit run (heights at the floor) along the centre line
-    of the platform_gap tile at ``level``, and its width [m]."""
-    col = int(np.where(np.asarray(env.tmap.col_type) == TERRAIN_TYPES.index("platform_gap"))[0][0])
-    h = np.asarray(env.hfield.heights)
-    hf = env.hfield
-    tile = env.tmap.spec.tile
-    x_lo, x_hi = col * tile.length_m, (col + 1) * tile.length_m
-    y_mid = (level + 0.5) * tile.width_m
-    i = int(round((y_mid - hf.y0_m) / hf.cell_m))
-    best = None
-    j = 0
-    while j < h.shape[1]:
-        x = hf.x0_m + j * hf.cell_m
-        if x_lo + 1.7 < x < x_hi and h[i, j] <= hf.z_floor_m + 1e-6:
-            k = j
-            while h[i, k] <= hf.z_floor_m + 1e-6:
-                k += 1
-            if best is None or k - j > best[1] - best[0]:
-                best = (j, k)
-            j = k
-        j += 1
-    if best is not None:
-        j, k = best
-        return col, (hf.x0_m + 0.5 * (j + k - 1) * hf.cell_m, y_mid), (k - j + 1) * hf.cell_m
-    raise AssertionError("no gap found in the platform_gap tile")
-
-
 def test_reset_perturbed_replaces_only_the_perturbation(env, fns):
     """Evaluation hook: the same draws as reset(), with the joint-reading offset and odometry level
     replaced. Actor obs layout: readings (F*Z), validity (F*Z), frame age (F), joint positions
@@ -140,14 +112,19 @@ def test_auto_reset_keeps_the_perturbation(env, fns):
 def test_robot_dropped_into_gap_terminates(env, fns):
     reset, step = fns
     state = reset(jax.random.split(jax.random.PRNGKey(3), NUM_ENVS))
-    col, (x, y), width = _gap_xy(env, level=env.tmap.num_levels - 1)  # the widest gaps
-    # Env 0 hovers over the pit at stance height above z = 0, turned 90 deg so that its stance
-    # width (feet at +-0.31 m) lies across the gap: nothing below its feet for ~1 m. (Along the
-    # gap's length it could stand across a gap narrower than its 0.9 m stance, as it should.)
-    assert width > 0.7, width
+    # Env 0 hovers at stance height above z = 0 over the pit beside the beam of the top level
+    # (beam <= 0.2 m wide at the tile's centre line; 1 m to the side there is pit for ~0.8 m in
+    # y, the whole course in x). Platform gaps are too narrow to be sure to swallow the robot:
+    # it could stand across a gap narrower than its stance, as it should.
+    col = int(np.where(np.asarray(env.tmap.col_type) == TERRAIN_TYPES.index("beam"))[0][0])
+    tile, hf = env.tmap.spec.tile, env.hfield
+    x = col * tile.length_m + tile.length_m / 2
+    y = (env.tmap.num_levels - 0.5) * tile.width_m + 1.0
+    gx, gy = np.meshgrid(np.linspace(x - 0.6, x + 0.6, 31), np.linspace(y - 0.45, y + 0.45, 23))
+    below = np.asarray(hf.height_at(jp.stack([gx.ravel(), gy.ravel()], axis=-1)))
+    assert np.all(below <= hf.z_floor_m + 1e-6), "the robot's footprint must be over the pit"
     qpos = state.pipeline_state.qpos
     qpos = qpos.at[0, 0:3].set(jp.array([x, y, env._stand_height + 0.05]))
-    qpos = qpos.at[0, 3:7].set(jp.array([np.cos(np.pi / 4), 0.0, 0.0, np.sin(np.pi / 4)]))
     state = state.replace(pipeline_state=state.pipeline_state.replace(qpos=qpos))
     failed = False
     for _ in range(40):  # 0.8 s of free fall is enough to drop > 1 m

@@ -30,6 +30,14 @@ PIT_TYPES = ("grid_stones", "two_row_stones", "platform_gap", "mixed_row_stones"
 # the spawn surface is 0 for all nine types; the env adds its base height on top.
 SPAWN_SURFACE_Z_M = {name: 0.0 for name in TERRAIN_TYPES}
 
+# Rendering (how solids are drawn on the vertex grid). The heightfield is piecewise linear between
+# vertices, so a solid whose outermost vertices lie inside its outline has a flat top one cell
+# shorter than the outline on average, and every gap opens one cell wider than nominal at the top
+# (a 5 cm gap on a 4 cm grid became a ~9 cm V-trench that swallowed a 6.3 cm foot ~20 cm deep). A
+# vertex is therefore solid when it lies within half a cell of a stone, platform or beam: the mean
+# flat-top extent is then the nominal size and the mean top opening of a gap the nominal gap (for
+# gaps wider than two cells); gaps narrower than one cell, which no foot fits, are not drawn.
+
 TWO_ROW_HALF_SPACING_M = 0.30  # row centres at y = centre +- this; ANYmal-D feet are at +-0.31 m
 STAIRS_MAX_RISE_M = 0.8  # total rise (or drop) of a stairs tile is capped at this [m]
 PYRAMID_MAX_HEIGHT_M = 0.6  # pyramids are truncated (flat top / bottom) at this height [m]
@@ -172,19 +180,28 @@ def _cell(u: jax.Array, pitch: jax.Array, n: int) -> tuple[jax.Array, jax.Array]
     return jp.clip(k.astype(jp.int32) + 1, 0, n - 1), local
 
 
-def _segments(u: jax.Array, gaps: jax.Array, lengths: jax.Array) -> tuple[jax.Array, jax.Array]:
-    """Alternating (gap k, solid k) segments laid from u = 0: (segment index, u is in a gap).
+def _segments(
+    u: jax.Array, gaps: jax.Array, lengths: jax.Array, half_cell: float
+) -> tuple[jax.Array, jax.Array]:
+    """Alternating (gap k, solid k) segments laid from u = 0: (index of the nearest solid
+    segment, -1 before the first; u is in a gap).
+
+    A vertex counts as in a gap only if it lies more than ``half_cell`` inside it (see
+    Rendering at the top of this module).
 
     Args:
       u: (...) position along the course [m].
       gaps: (n,) gap lengths [m]; gap k precedes solid k.
       lengths: (n,) solid lengths [m].
+      half_cell: half the vertex spacing [m].
     """
     pitch = gaps + lengths
     starts = jp.concatenate([jp.zeros((1,), pitch.dtype), jp.cumsum(pitch)[:-1]])
     k = jp.clip(jp.searchsorted(starts, u, side="right") - 1, 0, gaps.shape[0] - 1)
-    in_gap = (u - starts[k]) < gaps[k]
-    return k, in_gap
+    rel = u - starts[k]
+    in_gap = jp.abs(rel - gaps[k] / 2) < gaps[k] / 2 - half_cell
+    # A solid vertex in the first half of gap k belongs to solid k - 1 (-1: before the first).
+    return jp.where(rel < gaps[k] / 2, k - 1, k), in_gap
 
 
 def _finish(z: jax.Array, spec: TileSpec, pit_in_course: jax.Array | None = None) -> jax.Array:
@@ -222,8 +239,9 @@ def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     phase_y = jax.random.uniform(k_ph, (), maxval=1.0) * pitch  # grid phase across y
     kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
     ky, ly = _cell(y - phase_y, pitch, nky)
-    inside = (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2) & (
-        jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2
+    h = spec.cell_m / 2  # solid within half a cell of the stone (see Rendering above)
+    inside = (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2 + h) & (
+        jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2 + h
     )
     return _finish(top[ky, kx], spec, pit_in_course=~inside)
 
@@ -249,8 +267,9 @@ def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
         phase = jax.random.uniform(k_ph, (), maxval=0.5) * pitch  # row stagger ~ U(0, pitch/2)
         k, lx = _cell(x - spec.course_x0_m - gap / 2 - phase, pitch, n)
         yc = y_mid + side * TWO_ROW_HALF_SPACING_M + jy[k]
-        row = (jp.abs(lx - pitch / 2 - jx[k]) <= size * f[k] / 2) & (
-            jp.abs(y - yc) <= size * f[k] / 2
+        h = spec.cell_m / 2  # solid within half a cell of the stone (see Rendering above)
+        row = (jp.abs(lx - pitch / 2 - jx[k]) <= size * f[k] / 2 + h) & (
+            jp.abs(y - yc) <= size * f[k] / 2 + h
         )
         z = jp.where(row & ~inside, top[k], z)
         inside = inside | row
@@ -284,8 +303,9 @@ def _platform_gap(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     gaps = gap * jax.random.uniform(k_g, (n,), minval=0.85, maxval=1.0)
     lengths = jax.random.uniform(k_l, (n,), minval=len_lo, maxval=len_hi)
     top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
-    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths)
-    return _finish(top[k], spec, pit_in_course=in_gap)
+    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
+    z = jp.where(k >= 0, top[jp.maximum(k, 0)], 0.0)  # before the first platform: start level
+    return _finish(z, spec, pit_in_course=in_gap)
 
 
 def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
@@ -312,10 +332,11 @@ def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array
     phase_y = jax.random.uniform(k_ph, (nkx,), maxval=1.0) * pitch  # per-row shift across y
     kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
     ky, ly = _cell(y - phase_y[kx], pitch, nky)
+    h = spec.cell_m / 2  # solid within half a cell of the stone (see Rendering above)
     inside = (
         present[ky, kx]
-        & (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2)
-        & (jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2)
+        & (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2 + h)
+        & (jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2 + h)
     )
     return _finish(top[ky, kx], spec, pit_in_course=~inside)
 
@@ -334,8 +355,9 @@ def _beam(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     lengths = jax.random.uniform(k_l, (n,), minval=0.8, maxval=1.6)  # segment length [m]
     top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
     yc = (spec.ny - 1) * spec.cell_m / 2 + jax.random.uniform(k_y, (n,), minval=-1.0) * offset
-    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths)
-    on_beam = ~in_gap & (jp.abs(y - yc[k]) <= width / 2)
+    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
+    k = jp.maximum(k, 0)  # gap 0 is empty: nothing lies before the first segment
+    on_beam = ~in_gap & (jp.abs(y - yc[k]) <= width / 2 + spec.cell_m / 2)  # see Rendering above
     return _finish(top[k], spec, pit_in_course=~on_beam)
 
 

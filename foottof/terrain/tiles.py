@@ -204,6 +204,12 @@ def _segments(
     return jp.where(rel < gaps[k] / 2, k - 1, k), in_gap
 
 
+def _drawn_solid(offset: jax.Array, extent: jax.Array, spec: TileSpec) -> jax.Array:
+    """A vertex at ``offset`` from the centre of a solid ``extent`` wide is drawn solid: within
+    half a cell of its outline (see Rendering at the top of this module)."""
+    return jp.abs(offset) <= extent / 2 + spec.cell_m / 2
+
+
 def _finish(z: jax.Array, spec: TileSpec, pit_in_course: jax.Array | None = None) -> jax.Array:
     """Sets the start platform and goal region to z = 0 and clips to the representable range."""
     col = jp.arange(spec.nx)[None, :]
@@ -239,9 +245,8 @@ def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     phase_y = jax.random.uniform(k_ph, (), maxval=1.0) * pitch  # grid phase across y
     kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
     ky, ly = _cell(y - phase_y, pitch, nky)
-    h = spec.cell_m / 2  # solid within half a cell of the stone (see Rendering above)
-    inside = (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2 + h) & (
-        jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2 + h
+    inside = _drawn_solid(lx - pitch / 2 - jx[ky, kx], size * fx[ky, kx], spec) & _drawn_solid(
+        ly - pitch / 2 - jy[ky, kx], size * fy[ky, kx], spec
     )
     return _finish(top[ky, kx], spec, pit_in_course=~inside)
 
@@ -267,9 +272,8 @@ def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
         phase = jax.random.uniform(k_ph, (), maxval=0.5) * pitch  # row stagger ~ U(0, pitch/2)
         k, lx = _cell(x - spec.course_x0_m - gap / 2 - phase, pitch, n)
         yc = y_mid + side * TWO_ROW_HALF_SPACING_M + jy[k]
-        h = spec.cell_m / 2  # solid within half a cell of the stone (see Rendering above)
-        row = (jp.abs(lx - pitch / 2 - jx[k]) <= size * f[k] / 2 + h) & (
-            jp.abs(y - yc) <= size * f[k] / 2 + h
+        row = _drawn_solid(lx - pitch / 2 - jx[k], size * f[k], spec) & _drawn_solid(
+            y - yc, size * f[k], spec
         )
         z = jp.where(row & ~inside, top[k], z)
         inside = inside | row
@@ -332,11 +336,10 @@ def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array
     phase_y = jax.random.uniform(k_ph, (nkx,), maxval=1.0) * pitch  # per-row shift across y
     kx, lx = _cell(x - spec.course_x0_m - gap / 2, pitch, nkx)
     ky, ly = _cell(y - phase_y[kx], pitch, nky)
-    h = spec.cell_m / 2  # solid within half a cell of the stone (see Rendering above)
     inside = (
         present[ky, kx]
-        & (jp.abs(lx - pitch / 2 - jx[ky, kx]) <= size * fx[ky, kx] / 2 + h)
-        & (jp.abs(ly - pitch / 2 - jy[ky, kx]) <= size * fy[ky, kx] / 2 + h)
+        & _drawn_solid(lx - pitch / 2 - jx[ky, kx], size * fx[ky, kx], spec)
+        & _drawn_solid(ly - pitch / 2 - jy[ky, kx], size * fy[ky, kx], spec)
     )
     return _finish(top[ky, kx], spec, pit_in_course=~inside)
 
@@ -357,7 +360,7 @@ def _beam(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     yc = (spec.ny - 1) * spec.cell_m / 2 + jax.random.uniform(k_y, (n,), minval=-1.0) * offset
     k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
     k = jp.maximum(k, 0)  # gap 0 is empty: nothing lies before the first segment
-    on_beam = ~in_gap & (jp.abs(y - yc[k]) <= width / 2 + spec.cell_m / 2)  # see Rendering above
+    on_beam = ~in_gap & _drawn_solid(y - yc[k], width, spec)
     return _finish(top[k], spec, pit_in_course=~on_beam)
 
 

@@ -1,0 +1,109 @@
+"""Where the terrain curriculum stands: curriculum levels per terrain type in a run's checkpoint.
+
+``python -m foottof.ppo.levels RUN_DIR [--step N]`` reads the env state saved with a checkpoint
+(``train.checkpoint_env_state``, on by default) and prints, per terrain type of the training map,
+how many envs are at each curriculum level. The mean level of the learning curve hides this: a
+run can hold its box tiles at the top while its stepping stones stay at level 0.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import warnings
+
+import ml_collections
+import numpy as np
+import orbax.checkpoint as ocp
+
+from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
+from foottof.terrain.terrain_map import TERRAIN_TYPES, TerrainMapSpec
+
+# Leaves of the 'rollout' item (checkpoint manifest names) holding each env's level and map column.
+LEVEL_LEAF = "['env_state'].info['task'].level"
+COL_LEAF = "['env_state'].info['task'].col"
+
+
+def _checkpoint_dir(run_dir: str, step: int | None) -> str:
+    root = os.path.abspath(os.path.join(run_dir, CHECKPOINT_SUBDIR))
+    steps = sorted(int(s) for s in os.listdir(root) if s.isdigit()) if os.path.isdir(root) else []
+    if not steps:
+        raise FileNotFoundError(f"no checkpoint in {root}")
+    if step is None:
+        step = steps[-1]
+    if step not in steps:
+        raise ValueError(f"step={step!r} is not a checkpoint of {run_dir}; it has {steps}")
+    return os.path.join(root, str(step))
+
+
+def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None = None) -> dict:
+    """Arrays of the named 'rollout' leaves of checkpoint ``step`` (default: the latest).
+
+    Raises:
+      FileNotFoundError: no checkpoint, or it was saved without its env state.
+      KeyError: a name is not a leaf of the saved env state (the message lists similar ones).
+    """
+    path = _checkpoint_dir(run_dir, step)
+    with open(os.path.join(path, "manifest", "metadata")) as f:
+        manifest = json.load(f)
+    if "rollout" not in manifest:
+        raise FileNotFoundError(
+            f"{path} holds no env state (saved with train.checkpoint_env_state=False)"
+        )
+    leaf_names = [entry[0] for entry in manifest["rollout"]]
+    for n in names:
+        if n not in leaf_names:
+            near = [x for x in leaf_names if "task" in x][:8]
+            raise KeyError(f"{n!r} is not a saved env-state leaf; leaves with 'task': {near}")
+    with warnings.catch_warnings():  # orbax warns that it reads the sharding from the file
+        warnings.simplefilter("ignore")
+        flat = ocp.PyTreeCheckpointer().restore(os.path.join(path, "rollout"))
+    return {n: np.asarray(flat[f"leaf_{leaf_names.index(n):04d}"]) for n in names}
+
+
+def level_counts(run_dir: str, step: int | None = None) -> dict[str, np.ndarray]:
+    """Envs per curriculum level, per terrain type, in checkpoint ``step`` of ``run_dir``.
+
+    Returns:
+      {terrain type: (num_levels,) int counts}, in the order of the map's columns; the counts of
+      all types add up to the run's number of envs.
+    """
+    with open(os.path.join(run_dir, "config.json")) as f:
+        cfg = ml_collections.ConfigDict(json.load(f))
+    spec = TerrainMapSpec.from_config(cfg.terrain, int(cfg.stage))
+    leaves = read_rollout_leaves(run_dir, (LEVEL_LEAF, COL_LEAF), step)
+    level, col = leaves[LEVEL_LEAF].reshape(-1), leaves[COL_LEAF].reshape(-1)
+    if col.min() < 0 or col.max() >= spec.num_cols:
+        raise ValueError(f"map columns {col.min()}..{col.max()} outside [0, {spec.num_cols - 1}]")
+    types = np.asarray(spec.col_types)[col]
+    out = {}
+    for t in dict.fromkeys(spec.col_types):  # map order, each type once
+        out[TERRAIN_TYPES[t]] = np.bincount(level[types == t], minlength=spec.num_levels)
+    return out
+
+
+def format_table(counts: dict[str, np.ndarray]) -> str:
+    """Plain-text table: one row per type, envs per level, then the type's mean level."""
+    num_levels = len(next(iter(counts.values())))
+    head = f"{'terrain type':<18}" + "".join(f"{i:>5}" for i in range(num_levels)) + "   mean"
+    lines = [head]
+    for name, c in counts.items():
+        mean = float(np.dot(c, np.arange(num_levels)) / max(c.sum(), 1))
+        lines.append(f"{name:<18}" + "".join(f"{int(v):>5}" for v in c) + f"  {mean:5.2f}")
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("run_dir", help="run directory of train.py (or a policies/ folder)")
+    p.add_argument("--step", type=int, default=None, help="checkpoint number (default: latest)")
+    a = p.parse_args(argv)
+    checkpoint = os.path.basename(_checkpoint_dir(a.run_dir, a.step))
+    counts = level_counts(a.run_dir, a.step)
+    print(f"envs per curriculum level, checkpoint {checkpoint}")
+    print(format_table(counts))
+
+
+if __name__ == "__main__":
+    main()

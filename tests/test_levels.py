@@ -1,0 +1,52 @@
+"""Curriculum levels per terrain type read from a checkpoint (foottof/ppo/levels.py).
+
+Oracle: where each env spawned. Tiles are tile_length_m x tile_width_m rectangles laid out with
+map column i at world x in [i L, (i + 1) L) and level j at y in [j W, (j + 1) W), so the spawn
+position saved in the env state gives each env's column and level without the saved `col` and
+`level` leaves the tool reads.
+"""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+from foottof.ppo import levels
+from foottof.terrain.terrain_map import TERRAIN_TYPES, allocate_columns
+
+RUN = os.path.join(os.path.dirname(__file__), "..", "policies", "stage1")
+SPAWN_LEAF = "['env_state'].info['task'].spawn"
+
+
+def test_level_counts_match_the_tiles_the_envs_spawned_on():
+    with open(os.path.join(RUN, "config.json")) as f:
+        cfg = json.load(f)
+    t = cfg["terrain"]
+    counts = levels.level_counts(RUN)
+    spawn = levels.read_rollout_leaves(RUN, (SPAWN_LEAF,))[SPAWN_LEAF]
+    col = np.floor(spawn[:, 0] / t["tile_length_m"]).astype(int)
+    level = np.floor(spawn[:, 1] / t["tile_width_m"]).astype(int)
+    col_types = allocate_columns(t["stage1_weights"], t["num_cols"])
+    expected = {}
+    for c, lv in zip(col, level, strict=True):
+        name = TERRAIN_TYPES[col_types[c]]
+        expected.setdefault(name, np.zeros(t["num_levels"], int))[lv] += 1
+    assert set(counts) == set(expected)
+    for name, c in counts.items():
+        np.testing.assert_array_equal(c, expected[name], err_msg=name)
+    assert sum(int(c.sum()) for c in counts.values()) == cfg["ppo"]["num_envs"]
+
+
+def test_unknown_step_names_the_saved_ones():
+    with pytest.raises(ValueError, match=r"step=1 is not a checkpoint .* it has \[\d+"):
+        levels.level_counts(RUN, step=1)
+
+
+def test_cli_prints_one_row_per_type(capsys):
+    levels.main([RUN])
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("envs per curriculum level, checkpoint ")
+    rows = {line.split()[0] for line in out[2:]}
+    assert rows == {"grid_stones", "two_row_stones", "rough_boxes", "platform_gap",
+                    "mixed_row_stones"}  # fmt: skip

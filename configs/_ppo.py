@@ -36,6 +36,7 @@ def get_network_section() -> ml_collections.ConfigDict:
     c.critic_hidden = (512, 256, 128)  # critic MLP head hidden widths after the LSTM
     c.activation = "elu"  # MLP activation: 'elu', 'relu', 'tanh' or 'silu'
     c.init_noise_std = 1.0  # initial action std (state-independent, learned as log std)
+    c.max_noise_std = 0.0  # cap on the learned action std; 0 = no cap (rsl_rl has none)
     c.normalize_observations = True  # running mean/std normalization of actor and critic obs
     c.normalizer_std_eps = 1e-4  # added to the running variance: std >= 1e-2 (rsl_rl eps 1e-2)
     return c

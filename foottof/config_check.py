@@ -278,6 +278,7 @@ RULES = {
     "network.critic_hidden": _ints_pos,
     "network.activation": _choice(*ACTIVATIONS),
     "network.init_noise_std": _pos,
+    "network.max_noise_std": _nonneg,
     "network.normalize_observations": _bool,
     "network.normalizer_std_eps": _pos,
     "train.num_iterations": _int(1),

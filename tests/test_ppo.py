@@ -113,6 +113,30 @@ def test_gaussian_helpers_against_jax_scipy():
     np.testing.assert_allclose(kl, np.log(2) + 0.25 - 0.5, rtol=1e-6)
 
 
+def test_max_noise_std_caps_the_sampled_actions_and_the_logged_std():
+    # Raw log std at log(1.0) (init_noise_std), cap 0.2: every action the trainer samples, the
+    # behaviour std stored for the PPO ratio and the logged std must all be 0.2.
+    env = toy_envs.make_memory_env()
+    cfg = tiny_cfg()
+    cfg.ppo.entropy_coef = 0.01  # pushes the raw std up: the cap must hold it
+    cfg.network.init_noise_std = 1.0
+    cfg.network.max_noise_std = 0.2
+    trainer, state, history = train_history(env, cfg, 3)
+    assert [round(h["ppo/action_std"], 6) for h in history] == [0.2, 0.2, 0.2]
+    assert np.allclose(np.exp(state.params["params"]["log_std"]), 1.0)  # no gradient above the cap
+    networks = trainer.networks
+    obs = jax.tree.map(lambda v: jp.zeros((4096,) + v.shape[1:]), state.env_state.obs)
+    act = networks.policy_fn(state.params, state.normalizer, deterministic=False)
+    _, a = act(networks.init_carry(4096), obs, jp.ones((4096,), bool), jax.random.PRNGKey(1))
+    _, m = networks.policy_fn(state.params, state.normalizer)(
+        networks.init_carry(4096), obs, jp.ones((4096,), bool), None
+    )
+    np.testing.assert_allclose(np.std(np.asarray(a - m), axis=0), 0.2, rtol=0.06)
+    cfg.network.max_noise_std = -0.1
+    with pytest.raises(ValueError, match=r"network.max_noise_std=-0.1; must be >= 0"):
+        train_lib.make_train(env, cfg)
+
+
 # -------------------------------------------------------------------------------- memory task
 @pytest.fixture(scope="module")
 def lstm_memory_run():

@@ -74,6 +74,7 @@ class ActorCritic(nn.Module):
     critic_hidden: Sequence[int]
     activation: str
     init_noise_std: float
+    max_noise_std: float = 0.0  # cap on the action std (0: none); see Networks.action_log_std
 
     @nn.compact
     def __call__(self, carry: Carry, actor_obs: jax.Array, critic_obs: jax.Array):
@@ -91,7 +92,18 @@ class ActorCritic(nn.Module):
         log_std = self.param(
             "log_std", nn.initializers.constant(math.log(self.init_noise_std)), (self.action_size,)
         )
-        return carry, mean, log_std, value
+        return carry, mean, cap_log_std(log_std, self.max_noise_std), value
+
+
+def cap_log_std(log_std: jax.Array, max_noise_std: float) -> jax.Array:
+    """The learned log std capped at log(max_noise_std) (no cap when max_noise_std is 0).
+
+    Above the cap the std stays at the cap and the raw parameter gets no gradient (neither from
+    the policy loss nor from the entropy bonus); below it the cap changes nothing.
+    """
+    if max_noise_std <= 0:
+        return log_std
+    return jp.minimum(log_std, math.log(max_noise_std))
 
 
 def split_obs(obs: Obs) -> tuple[jax.Array, jax.Array]:
@@ -143,6 +155,10 @@ class Networks:
     @property
     def recurrent(self) -> bool:
         return self.module.recurrent
+
+    def action_log_std(self, params: Params) -> jax.Array:
+        """(A,) log std of the action distribution: the parameter, capped (network.max_noise_std)."""
+        return cap_log_std(params["params"]["log_std"], self.module.max_noise_std)
 
     def init_carry(self, batch_size: int) -> Carry:
         """Zero LSTM carry for `batch_size` envs (rsl_rl resets hidden states to zero)."""
@@ -234,6 +250,9 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
             raise ValueError(f"network.{name}={n[name]}; must be >= 1")
     if not n.init_noise_std > 0:
         raise ValueError(f"network.init_noise_std={n.init_noise_std}; must be > 0")
+    max_std = float(n.get("max_noise_std", 0.0))
+    if not max_std >= 0:
+        raise ValueError(f"network.max_noise_std={max_std}; must be >= 0 (0: no cap)")
     module = ActorCritic(
         action_size=int(action_size),
         recurrent=n.policy == "lstm",
@@ -243,5 +262,6 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
         critic_hidden=tuple(int(w) for w in n.critic_hidden),
         activation=str(n.activation),
         init_noise_std=float(n.init_noise_std),
+        max_noise_std=max_std,
     )
     return Networks(module, bool(n.normalize_observations), float(n.normalizer_std_eps))

@@ -260,7 +260,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     # ----------------------------------------------------------- rollout
     def _rollout(state: TrainState, key):
         params, normalizer = state.params, state.normalizer
-        log_std = params["params"]["log_std"]
+        log_std = networks.action_log_std(params)
 
         def step(carry, key_step):
             env_state, net_carry, prev_done, ep_return, ep_length = carry
@@ -337,7 +337,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
 
         data = losses.Minibatch(
             carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
-            log_probs=traj.log_probs, means=traj.means, log_std=state.params["params"]["log_std"],
+            log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(state.params),
             values=traj.values, advantages=advantages, returns=returns,
         )  # fmt: skip
         n_local = traj.rewards.shape[1]
@@ -374,7 +374,9 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
                 normalizer, net.select_obs(traj.obs), pmap_axis_name=AXIS
             )
 
-        metrics = _iteration_metrics(traj, sgd_metrics, params, opt_state)
+        metrics = _iteration_metrics(
+            traj, sgd_metrics, networks.action_log_std(params), params, opt_state
+        )
         new_state = TrainState(
             params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
             carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
@@ -406,7 +408,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     )
 
 
-def _iteration_metrics(traj: Transition, sgd_metrics: dict, params, opt_state) -> dict:
+def _iteration_metrics(traj: Transition, sgd_metrics: dict, log_std, params, opt_state) -> dict:
     """Scalar metrics of one iteration, reduced over all devices.
 
     'train/episode_return', 'train/episode_length': means over episodes finished in the rollout
@@ -433,7 +435,7 @@ def _iteration_metrics(traj: Transition, sgd_metrics: dict, params, opt_state) -
             m[k] = psum(jp.sum(v)) / n_steps
     m.update(jax.tree.map(jp.mean, sgd_metrics))
     m["ppo/learning_rate"] = opt_state.hyperparams["learning_rate"]
-    m["ppo/action_std"] = jp.mean(jp.exp(params["params"]["log_std"]))
+    m["ppo/action_std"] = jp.mean(jp.exp(log_std))
     finite = [jp.all(jp.isfinite(x)) for x in jax.tree.leaves(params)]
     m["ppo/params_finite"] = jp.all(jp.stack(finite)).astype(jp.float32)
     return {k: jp.asarray(v, jp.float32) for k, v in m.items()}

@@ -2,11 +2,11 @@
 
 Differs from stage1.py in: the CPU network of cpu.py / flat.py (LSTM 64, heads (128, 64)) so that
 it starts from the shipped flat policy (policies/flat), 256 envs, a 10 x 10 map (two columns per
-stage-1 type), checkpoints every 25 iterations (a few minutes on 2 cores), and a long run meant to
-be continued in chunks with --resume, and the action std capped at 0.4 (network.max_noise_std,
-from iteration 2826 of the campaign: the learned std had risen to 0.67, and at that noise the
-policy of iteration 2675 fell in 36 % of the episodes on the easiest tiles, without noise in 10 %). Terrain, sensors, noise, rewards
-and PPO are otherwise stage 1's.
+stage-1 type), checkpoints every 25 iterations (a few minutes on 2 cores), a long run meant to be
+continued in chunks with --resume, and the action std capped at 0.4 (network.max_noise_std, from
+iteration 2826 of the campaign on: the learned std had risen to 0.67, and with that noise the
+policy of iteration 2675 fell in 36 % of its episodes on the easiest tiles, without it in 10 %).
+Terrain, sensors, noise, rewards and PPO are otherwise stage 1's.
 """
 
 from configs import cpu

@@ -25,16 +25,28 @@ LEVEL_LEAF = "['env_state'].info['task'].level"
 COL_LEAF = "['env_state'].info['task'].col"
 
 
-def _checkpoint_dir(run_dir: str, step: int | None) -> str:
+def _manager(run_dir: str) -> ocp.CheckpointManager:
+    """Read-only orbax manager of ``run_dir``'s checkpoints (creates nothing on a bad path)."""
     root = os.path.abspath(os.path.join(run_dir, CHECKPOINT_SUBDIR))
-    steps = sorted(int(s) for s in os.listdir(root) if s.isdigit()) if os.path.isdir(root) else []
-    if not steps:
+    if not os.path.isdir(root):
         raise FileNotFoundError(f"no checkpoint in {root}")
+    return ocp.CheckpointManager(root, options=ocp.CheckpointManagerOptions(create=False))
+
+
+def resolve_step(run_dir: str, step: int | None = None) -> int:
+    """``step`` if it is a checkpoint of ``run_dir``, the latest one if ``step`` is None."""
+    manager = _manager(run_dir)
+    try:
+        steps = sorted(manager.all_steps())
+    finally:
+        manager.close()
+    if not steps:
+        raise FileNotFoundError(f"no checkpoint in {run_dir}/{CHECKPOINT_SUBDIR}")
     if step is None:
-        step = steps[-1]
+        return steps[-1]
     if step not in steps:
         raise ValueError(f"step={step!r} is not a checkpoint of {run_dir}; it has {steps}")
-    return os.path.join(root, str(step))
+    return step
 
 
 def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None = None) -> dict:
@@ -44,21 +56,29 @@ def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None =
       FileNotFoundError: no checkpoint, or it was saved without its env state.
       KeyError: a name is not a leaf of the saved env state (the message lists similar ones).
     """
-    path = _checkpoint_dir(run_dir, step)
-    with open(os.path.join(path, "manifest", "metadata")) as f:
-        manifest = json.load(f)
-    if "rollout" not in manifest:
-        raise FileNotFoundError(
-            f"{path} holds no env state (saved with train.checkpoint_env_state=False)"
-        )
-    leaf_names = [entry[0] for entry in manifest["rollout"]]
-    for n in names:
-        if n not in leaf_names:
-            near = [x for x in leaf_names if "task" in x][:8]
-            raise KeyError(f"{n!r} is not a saved env-state leaf; leaves with 'task': {near}")
-    with warnings.catch_warnings():  # orbax warns that it reads the sharding from the file
-        warnings.simplefilter("ignore")
-        flat = ocp.PyTreeCheckpointer().restore(os.path.join(path, "rollout"))
+    step = resolve_step(run_dir, step)
+    manager = _manager(run_dir)
+    try:
+        manifest = manager.restore(
+            step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
+        ).manifest
+        if "rollout" not in manifest:
+            raise FileNotFoundError(
+                f"checkpoint {step} of {run_dir} holds no env state (saved with "
+                f"train.checkpoint_env_state=False)"
+            )
+        leaf_names = [entry[0] for entry in manifest["rollout"]]
+        for n in names:
+            if n not in leaf_names:
+                near = [x for x in leaf_names if "task" in x][:8]
+                raise KeyError(f"{n!r} is not a saved env-state leaf; leaves with 'task': {near}")
+        with warnings.catch_warnings():  # orbax warns that it reads the sharding from the file
+            warnings.simplefilter("ignore")
+            flat = manager.restore(
+                step, args=ocp.args.Composite(rollout=ocp.args.StandardRestore())
+            ).rollout
+    finally:
+        manager.close()
     return {n: np.asarray(flat[f"leaf_{leaf_names.index(n):04d}"]) for n in names}
 
 
@@ -99,9 +119,9 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("run_dir", help="run directory of train.py (or a policies/ folder)")
     p.add_argument("--step", type=int, default=None, help="checkpoint number (default: latest)")
     a = p.parse_args(argv)
-    checkpoint = os.path.basename(_checkpoint_dir(a.run_dir, a.step))
-    counts = level_counts(a.run_dir, a.step)
-    print(f"envs per curriculum level, checkpoint {checkpoint}")
+    step = resolve_step(a.run_dir, a.step)
+    counts = level_counts(a.run_dir, step)
+    print(f"envs per curriculum level, checkpoint {step}")
     print(format_table(counts))
 
 

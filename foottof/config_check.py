@@ -303,6 +303,7 @@ RULES = {
     "eval.joint_offset_levels": _levels("joint_offset"),
     "eval.shank_length_levels": _levels("shank_length"),
     "eval.odometry_levels": _levels("odometry"),
+    "eval.deterministic": _bool,
     "eval.seed": _int(0),
     "eval.out_dir": _path,
 }

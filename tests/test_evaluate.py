@@ -177,6 +177,51 @@ def test_cli_bad_input(args, message, tmp_path):
     assert len(err_lines) == 1 and message in err_lines[0], p.stderr[-2000:]
 
 
+class _ConstantObsEnv:
+    """Single env whose observation is always zero and whose episodes last 4 steps; at the last
+    step 'episode/speed_ms' reads the first action component (what the rollout acted)."""
+
+    action_size = 2
+    observation_size = 3
+
+    def reset(self, key):
+        from brax.envs.base import State
+
+        z = jp.zeros(())
+        metrics = {"episode/success": z, "episode/failed": z, "episode/speed_ms": z}
+        return State(None, jp.zeros(3), z, z, metrics, {"t": jp.zeros((), jp.int32)})
+
+    def step(self, state, action):
+        t = state.info["t"] + 1
+        done = t >= 4
+        metrics = dict(state.metrics, **{"episode/speed_ms": jp.where(done, action[0], 0.0)})
+        info = {"t": jp.where(done, 0, t)}
+        return state.replace(done=done.astype(jp.float32), metrics=metrics, info=info)
+
+
+@pytest.mark.parametrize("deterministic", [True, False])
+def test_rollout_acts_with_the_mean_or_samples_at_the_capped_std(deterministic):
+    # Constant observations and a policy carry reset at every episode start: the mean action at
+    # the last step of an episode is the same in every env, so with eval.deterministic the acted
+    # values have no spread at all, and with sampling their spread across 1024 envs is the
+    # action std, init_noise_std 1.0 capped at max_noise_std 0.3.
+    cfg = tiny_cfg()
+    cfg.network.init_noise_std = 1.0
+    cfg.network.max_noise_std = 0.3
+    env = _ConstantObsEnv()
+    networks, params, normalizer = harness.load_policy(
+        cfg, env, jp.zeros((1, 3)), None, jax.random.PRNGKey(0)
+    )
+    rollout = rb.make_rollout(env, networks, 1024, 8, deterministic=deterministic)
+    done, _, _, speed = jax.device_get(rollout(params, normalizer, jax.random.PRNGKey(1), 0.0))
+    acted = speed[done > 0.5]  # 2 episodes x 1024 envs
+    assert acted.shape == (2048,)
+    if deterministic:
+        np.testing.assert_allclose(acted, acted[0], atol=1e-6)
+    else:
+        assert np.std(acted) == pytest.approx(0.3, rel=0.08)
+
+
 # ---------------------------------------------------------------------------------------------
 # End to end (one env compile)
 @pytest.fixture(scope="module")

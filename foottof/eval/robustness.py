@@ -123,8 +123,18 @@ def default_levels(eval_cfg: ml_collections.ConfigDict, perturbation: str) -> tu
 
 # ---------------------------------------------------------------------------------------------
 # Rollout and sweeps
-def make_rollout(env, networks, num_envs: int, steps: int, perturbation: str = "none"):
+def make_rollout(
+    env,
+    networks,
+    num_envs: int,
+    steps: int,
+    perturbation: str = "none",
+    deterministic: bool = True,
+):
     """jit-ed (params, normalizer, key, level) -> per-step (T, B) arrays done/success/failed/speed.
+
+    ``deterministic``: act with the policy mean (the default), or sample actions at the policy's
+    action std as in training (``eval.deterministic=False``: what the curriculum sees).
 
     ``level`` is a traced argument for the ``TRACED_PERTURBATIONS`` (given at reset by
     ``harness.perturbed_reset``), so one compile serves a whole sweep; for 'none' and
@@ -140,7 +150,7 @@ def make_rollout(env, networks, num_envs: int, steps: int, perturbation: str = "
     def rollout(params, normalizer, key, level):
         key_reset, key_run = jax.random.split(key)
         state = reset(jax.random.split(key_reset, num_envs), level)
-        act = networks.policy_fn(params, normalizer, deterministic=True)
+        act = networks.policy_fn(params, normalizer, deterministic=deterministic)
         carry = networks.init_carry(num_envs)
         first = jp.ones((num_envs,), bool)
 
@@ -202,7 +212,14 @@ def evaluate_sweep(
         env, networks, params, normalizer = make_eval_env_and_policy(
             cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
         )
-        rollout = make_rollout(env, networks, num_envs, env.episode_steps, perturbation)
+        rollout = make_rollout(
+            env,
+            networks,
+            num_envs,
+            env.episode_steps,
+            perturbation,
+            deterministic=bool(cfg.eval.get("deterministic", True)),
+        )
         for level in group:
             parts, collected, k_run = [], 0, key_run
             while collected < episodes:

@@ -17,7 +17,7 @@ def get_section() -> ml_collections.ConfigDict:
     e.joint_offset_levels = (0.0, 0.025, 0.05, 0.075, 0.1)  # static joint offset sweep [rad]
     e.shank_length_levels = (0.8, 0.9, 1.0, 1.1, 1.2)  # shank scale sweep (physics only) [-]
     e.odometry_levels = (0.0, 1.0, 2.0, 3.0, 4.0)  # odometry noise sweep [x 100 % level]
-    e.deterministic = True  # act with the policy mean (False: sample at the action std, as in training)
+    e.deterministic = True  # mean actions (False: sampled at the action std, as in training)
     e.seed = 0  # PRNG seed of the evaluation (map, policy init, episodes)
     e.out_dir = "eval_results"  # where tables, JSON/CSV and plots are written
     return e

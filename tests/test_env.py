@@ -33,6 +33,12 @@ def fns(env):
     return jax.jit(jax.vmap(env.reset)), jax.jit(jax.vmap(env.step))
 
 
+@pytest.fixture(scope="module")
+def reset_perturbed(env):
+    """(keys (NUM_ENVS, 2), joint offset, odometry level) -> State; one compile for the module."""
+    return jax.jit(jax.vmap(env.reset_perturbed, in_axes=(0, None, None)))
+
+
 def _on_columns(env, state):
     """Put env i on column i (level 0) by re-resetting with explicit tiles."""
     keys = jax.random.split(jax.random.PRNGKey(7), NUM_ENVS)
@@ -62,7 +68,7 @@ def test_shapes_and_no_nan_on_every_terrain(env, fns):
     assert types_seen == set(TERRAIN_TYPES)
     key = jax.random.PRNGKey(1)
     dones = 0
-    for _ in range(500):
+    for _ in range(250):  # 5 s: random actions fall well before
         key, k = jax.random.split(key)
         action = jax.random.uniform(k, (NUM_ENVS, 12), minval=-1.0, maxval=1.0)
         state = step(state, action)
@@ -73,16 +79,16 @@ def test_shapes_and_no_nan_on_every_terrain(env, fns):
     assert dones > 0  # random actions end episodes (falls) and they auto-reset
 
 
-def test_reset_perturbed_replaces_only_the_perturbation(env, fns):
+def test_reset_perturbed_replaces_only_the_perturbation(env, fns, reset_perturbed):
     """Evaluation hook: the same draws as reset(), with the joint-reading offset and odometry level
     replaced. Actor obs layout: readings (F*Z), validity (F*Z), frame age (F), joint positions
     (12), joint velocities (12), gravity (3), linear velocity estimate (3), ..."""
-    keys = jax.random.split(jax.random.PRNGKey(3), 4)
+    keys = jax.random.split(jax.random.PRNGKey(3), NUM_ENVS)  # the shapes compiled once
     base = fns[0](keys)
-    pert = jax.jit(jax.vmap(env.reset_perturbed, in_axes=(0, None, None)))(keys, 0.1, 0.0)
+    pert = reset_perturbed(keys, 0.1, 0.0)
     p = pert.info["task"].params
-    np.testing.assert_array_equal(p.joint_offset_rad, np.full((4, 12), 0.1, np.float32))
-    np.testing.assert_array_equal(p.odometry_level, np.zeros(4, np.float32))
+    np.testing.assert_array_equal(p.joint_offset_rad, np.full((NUM_ENVS, 12), 0.1, np.float32))
+    np.testing.assert_array_equal(p.odometry_level, np.zeros(NUM_ENVS, np.float32))
     assert float(env.cfg.env.randomization.odometry_level) > 0  # the config's level differs
     np.testing.assert_array_equal(pert.pipeline_state.qpos, base.pipeline_state.qpos)
     np.testing.assert_array_equal(pert.obs["privileged_state"], base.obs["privileged_state"])
@@ -96,11 +102,11 @@ def test_reset_perturbed_replaces_only_the_perturbation(env, fns):
     assert np.abs(b[:, v0 : v0 + 3]).max() > 1e-3  # the config's noise is not zero
 
 
-def test_auto_reset_keeps_the_perturbation(env, fns):
+def test_auto_reset_keeps_the_perturbation(env, fns, reset_perturbed):
     """A perturbation given at reset stays with the env: the auto-reset episode has it too."""
     _, step = fns
     keys = jax.random.split(jax.random.PRNGKey(5), NUM_ENVS)
-    state = jax.jit(jax.vmap(env.reset_perturbed, in_axes=(0, None, None)))(keys, 0.1, 2.0)
+    state = reset_perturbed(keys, 0.1, 2.0)
     state = _with(state, 0, step=env.episode_steps - 1)  # env 0 reaches its time limit
     state = step(state, jp.zeros((NUM_ENVS, 12)))
     assert float(state.done[0]) == 1.0 and int(state.info["task"].step[0]) == 0

@@ -3,11 +3,13 @@
 import os
 
 import nbformat
+import pytest
 from nbclient import NotebookClient
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
+@pytest.mark.slow  # ~3 min alone (every cell, two compiles): make test-slow
 def test_quickstart_notebook_runs(tmp_path):
     path = os.path.join(ROOT, "notebooks", "quickstart.ipynb")
     nb = nbformat.read(path, as_version=4)

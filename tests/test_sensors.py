@@ -168,7 +168,9 @@ def test_ray_matches_mj_ray(oracle):
     assert hit_r.mean() > 0.3 and (~hit_r).sum() > 100  # both outcomes exercised
 
 
-@pytest.mark.parametrize("first, max_range", [(0, 0.3), (4, R_ORACLE)])
+@pytest.mark.parametrize(
+    "first, max_range", [(0, 0.3), pytest.param(4, R_ORACLE, marks=pytest.mark.slow)]
+)
 def test_adaptive_walk_equals_walking_every_strip(oracle, monkeypatch, first, max_range):
     """The adaptive strip walk (most rays stop after a few strips, the rest are gathered and walk
     on) gives bit-identical distances and normals to every ray walking every strip, for one ray

@@ -387,6 +387,7 @@ def test_mock_ideal_equals_tof_on_exactly_representable_terrain():
     assert dd.max() <= 1.0e-3 + 1e-6
 
 
+@pytest.mark.slow  # the exactly-representable test above stays in the fast suite
 def test_mock_ideal_close_to_tof_on_stepping_stones(stones_hf):
     """Zero perturbation on 90 %-difficulty grid stones at random yaw. The 5 cm scan resamples the
     4 cm terrain: stone edges move by up to half a scan-cell diagonal (3.5 cm) and 1 m walls

@@ -23,7 +23,8 @@ def record_episode(
     perturbation: str = "none",
     level: float = 0.0,
 ):
-    """Runs one evaluation episode (deterministic policy) and records it.
+    """Runs one evaluation episode and records it (mean actions, or sampled ones if
+    ``cfg.eval.deterministic`` is False, as in the robustness cells).
 
     The env and policy come from ``harness.make_eval_env_and_policy`` (the robustness test
     ensemble with one perturbation cell applied, default none).
@@ -53,7 +54,9 @@ def record_episode(
     reset = jax.jit(jax.vmap(perturbed_reset(env, perturbation), in_axes=(0, None)))
     step = jax.vmap(env.step)
     state = reset(key_init[None], jp.float32(level))
-    act = networks.policy_fn(params, normalizer, deterministic=True)
+    act = networks.policy_fn(
+        params, normalizer, deterministic=bool(cfg.eval.get("deterministic", True))
+    )
     nf, nz = env.sensing.num_sensors, env.sensing.num_zones
 
     @jax.jit

@@ -121,11 +121,7 @@ def main(argv):
             _check_analyze(sources, plan)
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
         cfg = with_run_network(cfg, ckpt)
-        acts = (
-            "mean actions"
-            if cfg.eval.get("deterministic", True)
-            else "actions sampled at the action std"
-        )
+        acts = "mean actions" if cfg.eval.deterministic else "actions sampled at the action std"
         print(f"[evaluate] policy: {ckpt or 'untrained (fresh init)'} ({acts})")
         key = jax.random.PRNGKey(int(cfg.eval.seed))
         if _EXPORT.value:

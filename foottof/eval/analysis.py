@@ -54,9 +54,7 @@ def record_episode(
     reset = jax.jit(jax.vmap(perturbed_reset(env, perturbation), in_axes=(0, None)))
     step = jax.vmap(env.step)
     state = reset(key_init[None], jp.float32(level))
-    act = networks.policy_fn(
-        params, normalizer, deterministic=bool(cfg.eval.get("deterministic", True))
-    )
+    act = networks.policy_fn(params, normalizer, deterministic=bool(cfg.eval.deterministic))
     nf, nz = env.sensing.num_sensors, env.sensing.num_zones
 
     @jax.jit

@@ -218,7 +218,7 @@ def evaluate_sweep(
             num_envs,
             env.episode_steps,
             perturbation,
-            deterministic=bool(cfg.eval.get("deterministic", True)),
+            deterministic=bool(cfg.eval.deterministic),
         )
         for level in group:
             parts, collected, k_run = [], 0, key_run

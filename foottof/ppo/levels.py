@@ -33,13 +33,8 @@ def _manager(run_dir: str) -> ocp.CheckpointManager:
     return ocp.CheckpointManager(root, options=ocp.CheckpointManagerOptions(create=False))
 
 
-def resolve_step(run_dir: str, step: int | None = None) -> int:
-    """``step`` if it is a checkpoint of ``run_dir``, the latest one if ``step`` is None."""
-    manager = _manager(run_dir)
-    try:
-        steps = sorted(manager.all_steps())
-    finally:
-        manager.close()
+def _resolve(manager: ocp.CheckpointManager, run_dir: str, step: int | None) -> int:
+    steps = sorted(manager.all_steps())
     if not steps:
         raise FileNotFoundError(f"no checkpoint in {run_dir}/{CHECKPOINT_SUBDIR}")
     if step is None:
@@ -49,6 +44,15 @@ def resolve_step(run_dir: str, step: int | None = None) -> int:
     return step
 
 
+def resolve_step(run_dir: str, step: int | None = None) -> int:
+    """``step`` if it is a checkpoint of ``run_dir``, the latest one if ``step`` is None."""
+    manager = _manager(run_dir)
+    try:
+        return _resolve(manager, run_dir, step)
+    finally:
+        manager.close()
+
+
 def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None = None) -> dict:
     """Arrays of the named 'rollout' leaves of checkpoint ``step`` (default: the latest).
 
@@ -56,9 +60,9 @@ def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None =
       FileNotFoundError: no checkpoint, or it was saved without its env state.
       KeyError: a name is not a leaf of the saved env state (the message lists similar ones).
     """
-    step = resolve_step(run_dir, step)
     manager = _manager(run_dir)
     try:
+        step = _resolve(manager, run_dir, step)
         manifest = manager.restore(
             step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
         ).manifest

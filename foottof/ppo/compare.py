@@ -103,14 +103,12 @@ def write_rows(result: list[dict], path: str) -> None:
         w = csv.writer(f)
         w.writerow(["branch"] + cols)
         for r in result:
-            rows = r["rows"]
-            n = r["n"]
+            n, rows = r["n"], r["rows"]
+            its = rows["iteration"].astype(np.int64)
+            steps = rows["env_steps"].astype(np.int64)
+            vals = [rows.get(c, np.full(n, math.nan)) for c, _ in COLUMNS]
             for i in range(n):
-                vals = []
-                for c in cols:
-                    v = rows.get(c, np.full(n, math.nan))[i]
-                    vals.append(int(v) if c in ("iteration", "env_steps") else repr(float(v)))
-                w.writerow([r["name"]] + vals)
+                w.writerow([r["name"], its[i], steps[i]] + [repr(float(v[i])) for v in vals])
     os.replace(tmp, path)
 
 

@@ -10,6 +10,8 @@ def get_section() -> ml_collections.ConfigDict:
     r.stall_speed_ms = 0.1  # below this speed while far from the goal counts as stalling [m/s]
     r.stall_grace_s = 2.0  # no stall penalty during the first seconds of an episode [s]
     r.jump_grace_s = 0.2  # no jump penalty while the spawn drop lands [s]
+    r.edge_radius_m = 0.04  # foot_edge: terrain sampled this far from the foot centre [m]
+    r.edge_height_m = 0.05  # foot_edge: height spread of those samples that makes an edge [m]
     r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
     s = ml_collections.ConfigDict()
     s.reach = 10.0  # sparse: +1 at the last step if within success_radius_m of the goal
@@ -30,5 +32,6 @@ def get_section() -> ml_collections.ConfigDict:
         -0.5
     )  # after reaching the goal: sum of squared deviations from the default pose [rad^2]
     s.collision = -1.0  # number of knee spheres touching the terrain (not a termination) [per s]
+    s.foot_edge = 0.0  # number of feet touching the terrain at a height step (0 = off) [per s]
     r.scales = s
     return r

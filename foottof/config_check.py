@@ -251,6 +251,8 @@ RULES = {
     "reward.stall_speed_ms": _nonneg,
     "reward.stall_grace_s": _nonneg,
     "reward.jump_grace_s": _nonneg,
+    "reward.edge_radius_m": _pos,
+    "reward.edge_height_m": _pos,
     "reward.only_positive": _bool,
     "reward.scales.*": _num(),
     # ppo, network, train

@@ -228,6 +228,7 @@ def _inputs(**kw):
         failed=jp.asarray(0.0),
         truncated=jp.asarray(0.0),
         knee_contact=jp.zeros(4),
+        foot_edge=jp.zeros(4),
     )
     base.update(kw)
     return rw.RewardInputs(**base)
@@ -278,6 +279,8 @@ def test_reward_terms_hand_checked():
     assert _terms(failed=jp.asarray(1.0))["termination"] == 1.0
     # Collision: number of knees touching the terrain.
     assert _terms(knee_contact=jp.array([1.0, 0.0, 1.0, 0.0]))["collision"] == 2.0
+    # Foot edge: number of feet at an edge.
+    assert _terms(foot_edge=jp.array([1.0, 0.0, 1.0, 1.0]))["foot_edge"] == 3.0
     # Scaling: dense terms get the control dt, sparse ones not.
     scaled = rw.scaled_terms({k: jp.asarray(1.0) for k in rw.REWARD_TERMS}, rcfg.scales, 0.02)
     assert float(scaled["reach"]) == pytest.approx(rcfg.scales.reach)
@@ -390,3 +393,40 @@ def test_spawn_pays_no_penalty_events(env, fns):
         state = step(state, jp.zeros((NUM_ENVS, 12)))
         for term in ("jump", "collision", "termination"):
             assert np.all(np.asarray(state.metrics[f"reward/{term}"]) == 0.0), term
+        # the spawn platform is flat: no foot stands at an edge
+        assert np.all(np.asarray(state.metrics["task/feet_at_edges"]) == 0.0)
+
+
+def test_foot_edges_on_a_hand_built_step():
+    """A 0.2 m step between vertex columns x = 0 and x = 0.04 (bilinear ramp between them):
+    heights and edge flags by hand for feet on top, on the rim, at the wall foot, far, airborne."""
+    from foottof.terrain.heightfield import Heightfield
+
+    n, cell = 11, 0.04
+    x = -0.2 + cell * np.arange(n)
+    heights = np.where(x[None, :] >= 0.04 - 1e-9, 0.2, 0.0) * np.ones((n, 1))
+    hf = Heightfield(heights=jp.asarray(heights, jp.float32), x0_m=-0.2, y0_m=-0.2, cell_m=cell)
+    r_foot, margin = 0.0315, 0.01
+    feet = jp.array(
+        [
+            [0.12, 0.0, 0.2 + r_foot],  # on top, 8 cm from the ramp: samples all 0.2 -> no edge
+            [0.06, 0.0, 0.2 + r_foot],  # on the rim: samples 0.2, 0.2, 0.1 (x = 0.02) -> edge
+            [-0.02, 0.0, r_foot],  # at the wall foot: samples 0.1 (x = 0.02) .. 0 -> edge
+            [-0.12, 0.0, r_foot],  # on the ground 12 cm away: all 0 -> no edge
+        ]
+    )
+    edges = rw.foot_edges(feet, hf.height_at, r_foot, margin, 0.04, 0.05)
+    np.testing.assert_array_equal(np.asarray(edges), [0.0, 1.0, 1.0, 0.0])
+    # the same feet 0.3 m higher (in the air): no contact, no edge
+    lifted = rw.foot_edges(
+        feet + jp.array([0.0, 0.0, 0.3]), hf.height_at, r_foot, margin, 0.04, 0.05
+    )
+    np.testing.assert_array_equal(np.asarray(lifted), np.zeros(4))
+    # a foot slipping into the crack: its centre over the low vertex (x = 0, height 0) at the
+    # height of the step top touches the rim, which the contact test under the centre misses
+    crack = jp.array([[0.0, 0.0, 0.2], [0.0, 0.0, 0.25], [0.3, 0.0, 0.2 + r_foot], [0, 0, 0.1]])
+    edges = rw.foot_edges(crack, hf.height_at, r_foot, margin, 0.04, 0.05)
+    np.testing.assert_array_equal(np.asarray(edges), [1.0, 0.0, 0.0, 1.0])
+    # a spread of 0.1 m is no edge when edges need more than 0.15 m
+    high = rw.foot_edges(feet, hf.height_at, r_foot, margin, 0.04, 0.15)
+    np.testing.assert_array_equal(np.asarray(high), np.zeros(4))

@@ -257,6 +257,34 @@ def test_checkpoint_round_trip_exact(tmp_path):
     assert tree_equal(saved, jax.device_get(restored))
 
 
+def test_checkpoint_without_a_new_env_metric_restores_by_leaf_name(tmp_path):
+    """Code that adds a per-step env metric resumes an older checkpoint: every saved leaf comes
+    back under its name (the new leaf shifts the flatten order of all later ones), the new
+    metric keeps the target's fresh value; any other missing leaf is still an error."""
+    env = toy_envs.make_memory_env(privileged=True)
+    trainer = train_lib.make_train(env, tiny_cfg())
+    state, _ = trainer.iteration(trainer.init(jax.random.PRNGKey(0)))
+    saved = jax.device_get(state)
+    checkpointer = ckpt.Checkpointer(str(tmp_path))
+    checkpointer.save(state)
+
+    def with_extra(s, where):
+        es = s.env_state
+        fresh = jp.full_like(es.metrics["reward/recall"], 7.0)
+        if where == "metrics":  # sorts before "reward/recall": every later leaf moves by one
+            return s.replace(env_state=es.replace(metrics={**es.metrics, "reward/aaa": fresh}))
+        return s.replace(env_state=es.replace(info={**es.info, "aaa": fresh}))
+
+    target = with_extra(trainer.init(jax.random.PRNGKey(1)), "metrics")
+    restored, _ = checkpointer.restore(target)
+    restored = jax.device_get(restored)
+    assert np.all(restored.env_state.metrics.pop("reward/aaa") == 7.0)
+    assert tree_equal(saved, restored)
+    with pytest.raises(ValueError, match=r"\['env_state'\].info\['aaa'\].*missing"):
+        checkpointer.restore(with_extra(trainer.init(jax.random.PRNGKey(1)), "info"))
+    checkpointer.close()
+
+
 def test_resume_equals_straight_run(tmp_path, capsys):
     env = MEMORY_ENV
     straight = runner.run(tiny_cfg(num_iterations=4), env, str(tmp_path / "a"))
@@ -314,6 +342,26 @@ def test_trim_metrics_adds_the_wall_column_to_old_files(tmp_path):
         ("2", "20.0"),
         ("3", "30.0"),
     ]
+
+
+def test_resumed_run_logging_new_metrics_extends_the_csv_header(tmp_path):
+    """New code logs a metric the resumed run's metrics.csv lacks: the column is added to the
+    header (empty in the older rows), not silently dropped."""
+    logs = runner._Logs(str(tmp_path), tensorboard=False)
+    logs.write({"iteration": 1, "loss": 0.5}, 1)
+    logs.write({"iteration": 2, "loss": 0.4}, 2)
+    logs = runner._Logs(str(tmp_path), tensorboard=False)  # the resumed process
+    logs.write({"iteration": 3, "loss": 0.3, "task/new": 7.0}, 3)
+    logs.write({"iteration": 4, "task/new": 8.0, "loss": 0.2}, 4)
+    rows = list(csv.DictReader((tmp_path / "metrics.csv").open()))
+    assert list(rows[0]) == ["iteration", "loss", "task/new"]
+    assert [(r["iteration"], r["loss"], r["task/new"]) for r in rows] == [
+        ("1", "0.5", ""),
+        ("2", "0.4", ""),
+        ("3", "0.3", "7.0"),
+        ("4", "0.2", "8.0"),
+    ]
+    assert not (tmp_path / "metrics.csv.tmp").exists()
 
 
 class _NanAfter:

@@ -39,7 +39,7 @@ EPISODE_METRICS = (
     "curriculum/level",
     "episode/speed_ms",
 )
-STEP_METRICS = ("task/speed_ms",)  # averaged over all steps by the trainer
+STEP_METRICS = ("task/speed_ms", "task/feet_at_edges")  # averaged over all steps by the trainer
 
 
 @struct.dataclass
@@ -209,6 +209,15 @@ class AnymalToFEnv(Env):
         foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
         contact = foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m)
         contact = contact.astype(jp.float32)
+        rcfg = self.cfg.reward
+        foot_edge = rw.foot_edges(
+            foot_pos,
+            self.hfield.height_at,
+            self.foot_radius_m,
+            float(self.cfg.env.contact_margin_m),
+            float(rcfg.edge_radius_m),
+            float(rcfg.edge_height_m),
+        )
         gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
         failed, knee_contact = self._failed(d, gravity, fk)
         failed = failed | diverged
@@ -234,6 +243,7 @@ class AnymalToFEnv(Env):
             failed=failed.astype(jp.float32),
             truncated=truncated.astype(jp.float32),
             knee_contact=knee_contact,
+            foot_edge=foot_edge,
         )
         terms = rw.scaled_terms(
             rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
@@ -272,6 +282,7 @@ class AnymalToFEnv(Env):
                 "curriculum/level": task.level.astype(jp.float32),
                 "episode/speed_ms": jp.linalg.norm(qvel[0:2]),
                 "task/speed_ms": jp.linalg.norm(qvel[0:2]),
+                "task/feet_at_edges": jp.sum(foot_edge),
             }
         )
         info = dict(state.info)

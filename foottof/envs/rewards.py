@@ -18,6 +18,7 @@ DENSE_TERMS = (
     "jump",
     "posture",
     "collision",
+    "foot_edge",
 )
 SPARSE_TERMS = ("reach", "termination")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
@@ -41,6 +42,7 @@ class RewardInputs:
       time_s: time since the episode started [s].
       failed: 1.0 on a failure termination; truncated: 1.0 at the time limit.
       knee_contact: (4,) 1.0 where a knee sphere touches the terrain.
+      foot_edge: (4,) 1.0 where a foot touches the terrain next to a height step (`foot_edges`).
     """
 
     base_pos: jax.Array
@@ -60,6 +62,40 @@ class RewardInputs:
     failed: jax.Array
     truncated: jax.Array
     knee_contact: jax.Array
+    foot_edge: jax.Array
+
+
+def foot_edges(
+    foot_pos: jax.Array,
+    height_at,
+    foot_radius_m: float,
+    contact_margin_m: float,
+    edge_radius_m: float,
+    edge_height_m: float,
+) -> jax.Array:
+    """(4,) 1.0 where a foot stands on or against an edge of the terrain (Extreme Parkour's
+    ``feet_edge``, Cheng et al. 2023, from a height lookup instead of a precomputed edge mask).
+
+    The terrain is sampled under the foot centre and ``edge_radius_m`` away from it along +-x
+    and +-y. A foot is at an edge when those five heights span more than ``edge_height_m`` and
+    the foot is within ``foot_radius_m + contact_margin_m`` of the highest of them: resting on
+    the rim of a stone counts, and so does a foot slipping down its side into the crack (which
+    the contact test under the foot centre alone misses: the centre is over the crack).
+
+    Args:
+      foot_pos: (4, 3) world foot-centre positions [m].
+      height_at: terrain height lookup, (..., 2) xy -> (...) z [m] (Heightfield.height_at).
+      foot_radius_m, contact_margin_m: as the foot contact test [m].
+      edge_radius_m: horizontal distance of the four side samples from the foot centre [m].
+      edge_height_m: height spread that makes an edge [m].
+    """
+    r = float(edge_radius_m)
+    offsets = jp.array([[0.0, 0.0], [r, 0.0], [-r, 0.0], [0.0, r], [0.0, -r]], jp.float32)
+    heights = height_at(foot_pos[:, None, :2] + offsets[None])  # (4, 5)
+    top = jp.max(heights, axis=-1)
+    touching = foot_pos[:, 2] - top < foot_radius_m + contact_margin_m
+    spread = top - jp.min(heights, axis=-1)
+    return (touching & (spread > edge_height_m)).astype(jp.float32)
 
 
 def goal_distance(x: RewardInputs) -> jax.Array:
@@ -99,6 +135,7 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
         "jump": (jp.all(x.foot_contact < 0.5) & (x.time_s > rcfg.jump_grace_s)).astype(jp.float32),
         "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
         "collision": jp.sum(x.knee_contact),
+        "foot_edge": jp.sum(x.foot_edge),
     }
 
 

@@ -54,21 +54,59 @@ def _abstract(tree: Any) -> dict:
     }
 
 
-def _unflatten(target: Any, flat: dict) -> Any:
-    """Inverse of _flatten on the structure of `target` (zero-size leaves taken from `target`)."""
+# Per-step env metrics (rewards terms, task metrics) are outputs of the last step, recomputed by
+# the next one and read by nothing else: a checkpoint written before a metric existed restores
+# with that leaf taken from the target (its fresh value), so new metrics do not break a resume.
+RECOMPUTED_LEAF_PREFIX = "['env_state'].metrics["
+
+
+def _names(tree: Any) -> list[str]:
+    return [jax.tree_util.keystr(path) for path, _ in jax.tree_util.tree_flatten_with_path(tree)[0]]
+
+
+def _saved_index(target: Any, saved_manifest: list | None) -> list[int | None]:
+    """For each leaf of `target`: its index in the saved item (None: not saved, keep target's).
+
+    Without a manifest (or with the same leaves) this is the identity, as _flatten numbers them.
+    """
+    names = _names(target)
+    if saved_manifest is None:
+        return list(range(len(names)))
+    index = {entry[0]: i for i, entry in enumerate(saved_manifest)}
+    return [index.get(n) for n in names]
+
+
+def _abstract_saved(target: Any, saved_manifest: list | None) -> dict:
+    """Abstract arrays of the saved leaves, keyed as saved, shaped/sharded like `target`'s."""
+    leaves = jax.tree.leaves(target)
+    return {
+        f"leaf_{j:04d}": jax.ShapeDtypeStruct(
+            x.shape, x.dtype, sharding=getattr(x, "sharding", None)
+        )
+        for x, j in zip(leaves, _saved_index(target, saved_manifest), strict=True)
+        if j is not None and np.size(x) > 0
+    }
+
+
+def _unflatten(target: Any, flat: dict, saved_manifest: list | None = None) -> Any:
+    """Inverse of _flatten on the structure of `target` (zero-size leaves, and leaves the
+    checkpoint does not hold, taken from `target`)."""
     treedef = jax.tree.structure(target)
     leaves = [
-        flat[f"leaf_{i:04d}"] if np.size(x) > 0 else x
-        for i, x in enumerate(jax.tree.leaves(target))
+        flat[f"leaf_{j:04d}"] if (j is not None and np.size(x) > 0) else x
+        for x, j in zip(jax.tree.leaves(target), _saved_index(target, saved_manifest), strict=True)
     ]
     return jax.tree.unflatten(treedef, leaves)
 
 
 def check_compatible(item: str, saved_manifest: list, target: Any, source: str) -> None:
-    """Raises ValueError naming the first leaf whose name or shape differs from `target`."""
+    """Raises ValueError naming the first leaf whose name or shape differs from `target`
+    (a per-step env metric the checkpoint lacks is no mismatch: RECOMPUTED_LEAF_PREFIX)."""
     _, expected = _flatten(jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), target))
     saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
     for name, shape, _ in expected:
+        if name not in saved and name.startswith(RECOMPUTED_LEAF_PREFIX):
+            continue
         if name not in saved:
             raise ValueError(f"{source}: {item} leaf {name} is missing in the checkpoint")
         if saved[name] != tuple(shape):
@@ -136,11 +174,14 @@ class Checkpointer:
         items = [i for i in ITEMS if i in manifest]
         for item in items:
             check_compatible(item, manifest[item], _sub(target, item), f"checkpoint {step}")
-        args = {i: ocp.args.StandardRestore(_abstract(_sub(target, i))) for i in items}
+        args = {
+            i: ocp.args.StandardRestore(_abstract_saved(_sub(target, i), manifest[i]))
+            for i in items
+        }
         restored = self._manager.restore(step, args=ocp.args.Composite(**args))
         fields = {}
         for item in items:
-            fields.update(_unflatten(_sub(target, item), restored[item]))
+            fields.update(_unflatten(_sub(target, item), restored[item], manifest[item]))
         return target.replace(**fields), "rollout" in items
 
     def close(self) -> None:

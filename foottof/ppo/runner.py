@@ -110,6 +110,8 @@ class _Logs:
         new = self.fields is None
         if new:
             self.fields = list(row)
+        elif any(k not in self.fields for k in row):
+            self._add_columns([k for k in row if k not in self.fields])
         with open(self.path, "a", newline="") as f:
             w = csv.DictWriter(f, fieldnames=self.fields, extrasaction="ignore")
             if new:
@@ -119,6 +121,19 @@ class _Logs:
             for k, v in row.items():
                 if k != "iteration" and math.isfinite(v):
                     self.writer.add_scalar(k, v, step)
+
+    def _add_columns(self, names: list[str]) -> None:
+        """A resumed run logs metrics the file lacks (new code): rewrite it with them appended
+        to the header (empty in the older rows), atomically, so no column is silently dropped."""
+        with open(self.path, newline="") as f:
+            rows = list(csv.DictReader(f))
+        self.fields = self.fields + names
+        tmp = self.path + ".tmp"
+        with open(tmp, "w", newline="") as f:
+            w = csv.DictWriter(f, fieldnames=self.fields, restval="")
+            w.writeheader()
+            w.writerows(rows)
+        os.replace(tmp, self.path)
 
     def close(self) -> None:
         if self.writer is not None:

@@ -244,10 +244,17 @@ def test_brax_inverted_pendulum_improves():  # ~20 s alone, ~65 s on a loaded 2-
 MEMORY_ENV = toy_envs.make_memory_env()
 
 
-def test_checkpoint_round_trip_exact(tmp_path):
+@pytest.fixture(scope="module")
+def trained_once():
+    """A trainer and its state after one iteration (compiled once for the checkpoint tests)."""
     env = toy_envs.make_memory_env(privileged=True)
     trainer = train_lib.make_train(env, tiny_cfg())
     state, _ = trainer.iteration(trainer.init(jax.random.PRNGKey(0)))
+    return trainer, state
+
+
+def test_checkpoint_round_trip_exact(tmp_path, trained_once):
+    trainer, state = trained_once
     saved = jax.device_get(state)
     checkpointer = ckpt.Checkpointer(str(tmp_path))
     assert checkpointer.save(state) == 1
@@ -257,13 +264,11 @@ def test_checkpoint_round_trip_exact(tmp_path):
     assert tree_equal(saved, jax.device_get(restored))
 
 
-def test_checkpoint_without_a_new_env_metric_restores_by_leaf_name(tmp_path):
+def test_checkpoint_without_a_new_env_metric_restores_by_leaf_name(tmp_path, trained_once):
     """Code that adds a per-step env metric resumes an older checkpoint: every saved leaf comes
     back under its name (the new leaf shifts the flatten order of all later ones), the new
     metric keeps the target's fresh value; any other missing leaf is still an error."""
-    env = toy_envs.make_memory_env(privileged=True)
-    trainer = train_lib.make_train(env, tiny_cfg())
-    state, _ = trainer.iteration(trainer.init(jax.random.PRNGKey(0)))
+    trainer, state = trained_once
     saved = jax.device_get(state)
     checkpointer = ckpt.Checkpointer(str(tmp_path))
     checkpointer.save(state)

@@ -54,7 +54,7 @@ def _abstract(tree: Any) -> dict:
     }
 
 
-# Per-step env metrics (rewards terms, task metrics) are outputs of the last step, recomputed by
+# Per-step env metrics (reward terms, task metrics) are outputs of the last step, recomputed by
 # the next one and read by nothing else: a checkpoint written before a metric existed restores
 # with that leaf taken from the target (its fresh value), so new metrics do not break a resume.
 RECOMPUTED_LEAF_PREFIX = "['env_state'].metrics["

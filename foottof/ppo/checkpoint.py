@@ -43,17 +43,6 @@ def _flatten(tree: Any) -> tuple[dict, list]:
     return flat, manifest
 
 
-def _abstract(tree: Any) -> dict:
-    leaves = jax.tree.leaves(tree)
-    return {
-        f"leaf_{i:04d}": jax.ShapeDtypeStruct(
-            x.shape, x.dtype, sharding=getattr(x, "sharding", None)
-        )
-        for i, x in enumerate(leaves)
-        if np.size(x) > 0
-    }
-
-
 # Per-step env metrics (reward terms, task metrics) are outputs of the last step, recomputed by
 # the next one and read by nothing else: a checkpoint written before a metric existed restores
 # with that leaf taken from the target (its fresh value), so new metrics do not break a resume.
@@ -76,8 +65,9 @@ def _saved_index(target: Any, saved_manifest: list | None) -> list[int | None]:
     return [index.get(n) for n in names]
 
 
-def _abstract_saved(target: Any, saved_manifest: list | None) -> dict:
-    """Abstract arrays of the saved leaves, keyed as saved, shaped/sharded like `target`'s."""
+def _abstract(target: Any, saved_manifest: list | None = None) -> dict:
+    """Abstract arrays of the saved leaves, keyed as saved, shaped/sharded like `target`'s
+    (without a manifest: every non-empty leaf of `target`, numbered as _flatten does)."""
     leaves = jax.tree.leaves(target)
     return {
         f"leaf_{j:04d}": jax.ShapeDtypeStruct(
@@ -174,10 +164,7 @@ class Checkpointer:
         items = [i for i in ITEMS if i in manifest]
         for item in items:
             check_compatible(item, manifest[item], _sub(target, item), f"checkpoint {step}")
-        args = {
-            i: ocp.args.StandardRestore(_abstract_saved(_sub(target, i), manifest[i]))
-            for i in items
-        }
+        args = {i: ocp.args.StandardRestore(_abstract(_sub(target, i), manifest[i])) for i in items}
         restored = self._manager.restore(step, args=ocp.args.Composite(**args))
         fields = {}
         for item in items:

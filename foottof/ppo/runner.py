@@ -110,8 +110,8 @@ class _Logs:
         new = self.fields is None
         if new:
             self.fields = list(row)
-        elif any(k not in self.fields for k in row):
-            self._add_columns([k for k in row if k not in self.fields])
+        elif missing := [k for k in row if k not in self.fields]:
+            self._add_columns(missing)
         with open(self.path, "a", newline="") as f:
             w = csv.DictWriter(f, fieldnames=self.fields, extrasaction="ignore")
             if new:
@@ -128,12 +128,7 @@ class _Logs:
         with open(self.path, newline="") as f:
             rows = list(csv.DictReader(f))
         self.fields = self.fields + names
-        tmp = self.path + ".tmp"
-        with open(tmp, "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=self.fields, restval="")
-            w.writeheader()
-            w.writerows(rows)
-        os.replace(tmp, self.path)
+        _rewrite_csv(self.path, self.fields, rows)
 
     def close(self) -> None:
         if self.writer is not None:
@@ -156,6 +151,17 @@ def _write_config(cfg: ml_collections.ConfigDict, run_dir: str) -> None:
     os.replace(tmp, path)
     with open(os.path.join(run_dir, "config.yaml"), "w") as f:
         f.write(cfg.to_yaml())
+
+
+def _rewrite_csv(path: str, fields: list[str], rows: list[dict]) -> None:
+    """Atomically replaces the CSV at ``path`` with ``rows`` under ``fields`` (missing cells
+    empty, keys outside ``fields`` dropped)."""
+    tmp = path + ".tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=fields, restval="", extrasaction="ignore")
+        w.writeheader()
+        w.writerows(rows)
+    os.replace(tmp, path)
 
 
 WALL_COLUMN = "time/total_h"  # cumulative wall-clock hours of the run, over all resumed chunks
@@ -195,12 +201,7 @@ def trim_metrics(run_dir: str, iteration: int) -> float:
         for r in rows:
             total_s += float(r.get("time/iteration_s") or 0.0)
             r[WALL_COLUMN] = repr(total_s / 3600.0)
-    tmp = path + ".tmp"
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields, extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(tmp, path)
+    _rewrite_csv(path, fields, rows)
     return float(rows[-1][WALL_COLUMN]) * 3600.0 if rows else 0.0
 
 

@@ -132,9 +132,10 @@ def main(argv):
             return
         total = sum(len(levels) for _, _, levels in plan) * int(cfg.eval.episodes)
         with tqdm(total=total, unit="ep", desc="evaluate") as bar:
-            rows = rb.run_sweeps(cfg, plan, ckpt, key, bar)
+            rows, outcomes = rb.run_sweeps(cfg, plan, ckpt, key, bar, return_outcomes=True)
+        draws = results.episode_draws(cfg)
         paths = results.write_run(
-            out, _SOURCE.value, pert, rows, ckpt, float(cfg.env.episode_length_s)
+            out, _SOURCE.value, pert, rows, ckpt, float(cfg.env.episode_length_s), outcomes, draws
         )
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")

@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from configs import smoke
-from foottof.eval import harness, plots, results
+from foottof.eval import harness, paired, plots, results
 from foottof.eval import robustness as rb
 from foottof.perception import check_source
 from foottof.ppo import run_dir
@@ -81,6 +81,62 @@ def test_wilson_interval_hand_computed():
     assert lo == 0.0 and hi == pytest.approx(3.8415 / (20 + 3.8415), abs=1e-4)
     with pytest.raises(ValueError, match="successes=5, n=3"):
         results.wilson_interval(5, 3)
+
+
+def test_mcnemar_exact_hand_computed():
+    assert paired.mcnemar_exact(0, 0) == 1.0
+    assert paired.mcnemar_exact(0, 5) == pytest.approx(2 / 32)  # 2 x 0.5^5
+    assert paired.mcnemar_exact(9, 1) == pytest.approx(2 * (1 + 10) / 1024)
+    assert paired.mcnemar_exact(3, 7) == pytest.approx(2 * (1 + 10 + 45 + 120) / 1024)
+    assert paired.mcnemar_exact(5, 5) == 1.0  # the tail sum exceeds 1/2: clipped
+    assert paired.mcnemar_exact(7, 3) == paired.mcnemar_exact(3, 7)
+    with pytest.raises(ValueError, match="must be >= 0"):
+        paired.mcnemar_exact(-1, 2)
+
+
+def _episodes_doc(success, failed, seed=0, fingerprint="f"):
+    n = len(success)
+    cell = {"source": "tof", "perturbation": "none", "level": 0.0}
+    cell |= {"success": success, "failed": failed, "finished": [1] * n, "length": [9] * n}
+    cell["mean_speed_ms"] = [0.5] * n
+    draws = {"seed": seed, "num_envs": n, "episodes": n, "fingerprint": fingerprint}
+    return {"schema_version": 1, "checkpoint": "x", "draws": draws, "cells": [cell]}
+
+
+def test_paired_cells_hand_checked():
+    a = _episodes_doc([1] * 10 + [0] * 5 + [1] * 3, [0] * 10 + [1] * 5 + [0] * 3)
+    b = _episodes_doc([0] * 10 + [1] + [0] * 4 + [1] * 3, [1] * 9 + [0] * 9)
+    (row,) = paired.pair_cells(a, b)
+    assert (row["successes_a"], row["successes_b"], row["a_only"], row["b_only"]) == (13, 4, 10, 1)
+    assert row["p_value"] == pytest.approx(2 * (1 + 11) / 2048)  # 11 discordant, 1 the other way
+    assert (row["falls_a"], row["falls_b"], row["episodes"]) == (5, 9, 18)
+    assert "McNemar" in paired.format_table([row])
+    with pytest.raises(ValueError, match=r"config .* differs"):
+        paired.pair_cells(a, _episodes_doc([0] * 18, [0] * 18, fingerprint="g"))
+
+
+def test_draws_fingerprint_follows_what_decides_the_episodes():
+    base = results.draws_fingerprint(tiny_cfg())
+    same, differ = tiny_cfg(), tiny_cfg()
+    same.eval.out_dir, same.eval.episodes, same.ppo.learning_rate, same.seed = "x", 9, 0.5, 7
+    same.eval.odometry_levels = (0.0, 1.0)
+    differ.eval.difficulty_fraction = 0.5
+    assert results.draws_fingerprint(same) == base != results.draws_fingerprint(differ)
+
+
+def test_paired_cli_bad_input_and_output(tmp_path, capsys):
+    with pytest.raises(SystemExit, match="no such evaluation folder"):
+        paired.main([str(tmp_path / "nope"), str(tmp_path)])
+    with pytest.raises(SystemExit, match=r"no per-episode file \(episodes_\*.json\)"):
+        paired.main([str(tmp_path), str(tmp_path)])
+    for name, doc in (("a", _episodes_doc([1, 0], [0, 1])), ("b", _episodes_doc([0, 0], [1, 1]))):
+        (tmp_path / name).mkdir()
+        (tmp_path / name / "episodes_tof_none.json").write_text(json.dumps(doc))
+    out = tmp_path / "paired.csv"
+    paired.main([f"old={tmp_path / 'a'}", f"new={tmp_path / 'b'}", "--out", str(out)])
+    assert "old only" in capsys.readouterr().out
+    (row,) = list(csv.DictReader(out.open()))
+    assert tuple(row) == paired.PAIRED_KEYS and (row["a_only"], row["b_only"]) == ("1", "0")
 
 
 def test_check_inputs():
@@ -228,17 +284,33 @@ def test_rollout_acts_with_the_mean_or_samples_at_the_capped_std(deterministic):
 def e2e(tmp_path_factory):
     cfg = tiny_cfg()
     out = str(tmp_path_factory.mktemp("eval"))
-    rows = rb.evaluate_sweep(
-        cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0)
+    rows, outcomes = rb.evaluate_sweep(
+        cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0), return_outcomes=True
     )  # one compile for both levels
-    doc = results.results_document(rows, None, cfg.env.episode_length_s)
-    paths = results.write_results(out, "mock_ideal", "odometry", doc)
+    written = results.write_run(  # what evaluate.py writes
+        out,
+        "mock_ideal",
+        "odometry",
+        rows,
+        None,
+        cfg.env.episode_length_s,
+        outcomes,
+        results.episode_draws(cfg),
+    )
+    paths = {
+        "json": os.path.join(out, "results_mock_ideal_odometry.json"),
+        "csv": os.path.join(out, "results_mock_ideal_odometry.csv"),
+        "png": os.path.join(out, "robustness.png"),
+        "episodes": os.path.join(out, "episodes_mock_ideal_odometry.json"),
+    }
+    assert sorted(written) == sorted(paths.values())
     return cfg, out, rows, paths
 
 
 def test_end_to_end_writes_outputs(e2e):
     _, out, rows, paths = e2e
     assert sorted(os.listdir(out)) == [
+        "episodes_mock_ideal_odometry.json",
         "results_mock_ideal_odometry.csv",
         "results_mock_ideal_odometry.json",
         "robustness.png",
@@ -262,6 +334,29 @@ def test_end_to_end_writes_outputs(e2e):
     with open(paths["png"], "rb") as f:
         assert f.read(8) == b"\x89PNG\r\n\x1a\n"
     assert "mock_ideal" in results.format_table(rows)
+
+
+def test_per_episode_outcomes_match_the_rows_and_pair_with_themselves(e2e, tmp_path):
+    cfg, out, rows, paths = e2e
+    doc = paired.load_episodes(paths["episodes"])
+    assert doc["draws"] == results.episode_draws(cfg)
+    assert [(c["source"], c["perturbation"], c["level"]) for c in doc["cells"]] == [
+        ("mock_ideal", "odometry", 0.0),
+        ("mock_ideal", "odometry", 2.0),
+    ]
+    for cell, row in zip(doc["cells"], rows, strict=True):
+        assert all(len(cell[k]) == 4 for k in results.EPISODE_KEYS)
+        assert sum(cell["success"]) == row["successes"] and sum(cell["failed"]) == row["falls"]
+        assert np.mean(cell["mean_speed_ms"]) == pytest.approx(row["mean_speed_ms"], abs=1e-3)
+    same = paired.pair_folders(out, out)
+    assert [(r["a_only"], r["b_only"], r["p_value"]) for r in same] == [(0, 0, 1.0)] * 2
+    assert [r["successes_a"] for r in same] == [r["successes"] for r in rows]
+    other = tmp_path / "other"  # the same outcomes, evaluated with another seed: no pairing
+    other.mkdir()
+    doc["draws"]["seed"] += 1
+    (other / os.path.basename(paths["episodes"])).write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="seed differs"):
+        paired.pair_folders(out, str(other))
 
 
 def _save_checkpoint(run_dir, params, normalizer):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import glob
+import hashlib
 import io
 import json
 import math
@@ -25,6 +26,23 @@ RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
     "falls",
 )
 TOP_KEYS = ("schema_version", "checkpoint", "episode_length_s", "results")
+
+# Per-episode outcomes (episodes_<source>_<perturbation>.json), for paired comparisons of two
+# policies on the same episode draws (foottof.eval.paired).
+EPISODES_SCHEMA_VERSION = 1
+EPISODE_KEYS = ("success", "failed", "finished", "length", "mean_speed_ms")  # (n,) per cell
+# Config sections that decide the episode draws (map, spawn/goal, sensor noise) and outcomes of an
+# evaluation; the policy's own sections (ppo, network, train) and the top-level training seed
+# do not. Leaves of c.eval that only choose what runs or where it goes are left out too.
+DRAW_SECTIONS = ("env", "eval", "noise", "reward", "sensor", "stage", "terrain")
+_NOT_DRAW_EVAL_KEYS = (
+    "episodes",
+    "out_dir",
+    "sources",
+    "joint_offset_levels",
+    "shank_length_levels",
+    "odometry_levels",
+)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -75,6 +93,68 @@ def results_document(rows: list[dict], checkpoint: str | None, episode_length_s:
     }
 
 
+def draws_fingerprint(cfg) -> str:
+    """sha256 (16 hex digits) of the config leaves that decide an evaluation's episode draws
+    and outcomes (DRAW_SECTIONS): two evaluations with equal fingerprints, seeds, batch sizes and
+    episode counts ran the same episodes, so their outcomes pair episode by episode."""
+    d = {k: cfg[k].to_dict() if hasattr(cfg[k], "to_dict") else cfg[k] for k in DRAW_SECTIONS}
+    d["eval"] = dict(d["eval"])
+    for k in _NOT_DRAW_EVAL_KEYS:
+        d["eval"].pop(k, None)
+    text = json.dumps(d, sort_keys=True, default=repr)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+def episode_draws(cfg) -> dict:
+    """What two evaluations must share for their episodes to pair (episodes_document's draws):
+    eval.seed, the batch size actually run, eval.episodes and draws_fingerprint."""
+    episodes = int(cfg.eval.episodes)
+    return {
+        "seed": int(cfg.eval.seed),
+        "num_envs": min(int(cfg.eval.num_envs), episodes),
+        "episodes": episodes,
+        "fingerprint": draws_fingerprint(cfg),
+    }
+
+
+def episodes_document(cells: list[tuple[dict, dict]], checkpoint: str | None, draws: dict) -> dict:
+    """Per-episode outcomes of the cells of one results file.
+
+    Args:
+      cells: (result row, first-episode outcomes) per cell; the outcomes are the (n,) arrays of
+        robustness.first_episode_outcomes, concatenated over the batches of the cell.
+      checkpoint: the evaluated checkpoint (None: untrained).
+      draws: what pairs two evaluations: {"seed", "num_envs", "episodes", "fingerprint"}.
+    """
+    out = []
+    for row, outcomes in cells:
+        n = row["episodes"]
+        cell = {k: row[k] for k in ("source", "perturbation", "level")}
+        for k in EPISODE_KEYS:
+            v = np.asarray(outcomes[k])
+            if v.shape != (n,):
+                raise ValueError(f"episode outcome {k!r} has shape {v.shape}; expected ({n},)")
+            cell[k] = (
+                [round(float(x), 4) for x in v] if k == "mean_speed_ms" else v.astype(int).tolist()
+            )
+        if sum(cell["success"]) != row["successes"] or sum(cell["failed"]) != row["falls"]:
+            raise ValueError(
+                f"episode outcomes of {cell['source']}/{cell['perturbation']} "
+                f"level {cell['level']} disagree with its result row"
+            )
+        out.append(cell)
+    return {
+        "schema_version": EPISODES_SCHEMA_VERSION,
+        "checkpoint": checkpoint or "untrained (fresh init)",
+        "draws": dict(draws),
+        "cells": out,
+    }
+
+
+def episodes_basename(source: str, perturbation: str) -> str:
+    return f"episodes_{source}_{perturbation}"
+
+
 def csv_text(rows: list[dict]) -> str:
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=RESULT_KEYS, lineterminator="\n")
@@ -123,9 +203,12 @@ def result_basename(source: str, perturbation: str) -> str:
     return f"results_{source}_{perturbation}"
 
 
-def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) -> dict:
+def write_results(
+    out_dir: str, source_flag: str, perturbation: str, doc: dict, episodes: dict | None = None
+) -> dict:
     """Writes results_<source>_<perturbation>.{json,csv} and robustness.png (all results in
-    out_dir on shared axes); returns {kind: path}."""
+    out_dir on shared axes), and with ``episodes`` (episodes_document) the per-episode outcomes
+    episodes_<source>_<perturbation>.json; returns {kind: path}."""
     from foottof.eval.plots import robustness_png
 
     base = os.path.join(out_dir, result_basename(source_flag, perturbation))
@@ -134,6 +217,10 @@ def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) 
         "csv": base + ".csv",
         "png": os.path.join(out_dir, "robustness.png"),
     }
+    if episodes is not None:
+        paths["episodes"] = os.path.join(
+            out_dir, episodes_basename(source_flag, perturbation) + ".json"
+        )
     others = [p for p in glob.glob(os.path.join(out_dir, "results_*.json")) if p != paths["json"]]
     rows = list(doc["results"])
     seen = {(r["source"], r["perturbation"], r["level"]) for r in rows}
@@ -147,13 +234,14 @@ def write_results(out_dir: str, source_flag: str, perturbation: str, doc: dict) 
             if (r["source"], r["perturbation"], r["level"]) not in seen:
                 seen.add((r["source"], r["perturbation"], r["level"]))
                 rows.append(r)
-    write_atomic(
-        {
-            paths["json"]: json.dumps(doc, indent=2).encode(),
-            paths["csv"]: csv_text(doc["results"]).encode(),
-            paths["png"]: robustness_png(rows),
-        }
-    )
+    files = {
+        paths["json"]: json.dumps(doc, indent=2).encode(),
+        paths["csv"]: csv_text(doc["results"]).encode(),
+        paths["png"]: robustness_png(rows),
+    }
+    if episodes is not None:
+        files[paths["episodes"]] = json.dumps(episodes).encode()
+    write_atomic(files)
     return paths
 
 
@@ -164,12 +252,18 @@ def write_run(
     rows: list[dict],
     checkpoint: str | None,
     episode_length_s: float,
+    episodes: list[dict] | None = None,
+    draws: dict | None = None,
 ) -> list[str]:
     """Writes the rows of one evaluate.py run (write_results); returns the paths written.
 
     One results file named by the --perturbation flag; without the flag (each source's default
     sweep) one file per perturbation that ran, so a later explicit run of it replaces it.
+    ``episodes`` (the first-episode outcomes of each row, in row order) and ``draws`` (see
+    episodes_document) add the per-episode file next to each results file.
     """
+    if episodes is not None and (draws is None or len(episodes) != len(rows)):
+        raise ValueError("per-episode outcomes need draws and one outcome set per result row")
     names = (
         [perturbation_flag]
         if perturbation_flag
@@ -177,8 +271,13 @@ def write_run(
     )
     paths = []
     for name in names:
-        sel = rows if perturbation_flag else [r for r in rows if r["perturbation"] == name]
-        doc = results_document(sel, checkpoint, episode_length_s)
-        written = write_results(out_dir, source_flag, name, doc).values()
+        idx = [i for i, r in enumerate(rows) if perturbation_flag or r["perturbation"] == name]
+        doc = results_document([rows[i] for i in idx], checkpoint, episode_length_s)
+        ep_doc = (
+            None
+            if episodes is None
+            else episodes_document([(rows[i], episodes[i]) for i in idx], checkpoint, draws)
+        )
+        written = write_results(out_dir, source_flag, name, doc, ep_doc).values()
         paths += [p for p in written if p not in paths]
     return paths

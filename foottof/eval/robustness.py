@@ -180,7 +180,8 @@ def evaluate_sweep(
     checkpoint: str | None,
     key: jax.Array,
     progress=None,
-) -> list[dict]:
+    return_outcomes: bool = False,
+):
     """Runs eval.episodes first episodes at every level of one (source, perturbation); rows.
 
     Every level sees the same terrain map, policy and episode draws (spawn, goal, sensor noise):
@@ -194,9 +195,14 @@ def evaluate_sweep(
       checkpoint: checkpoint path, or None for a freshly initialized (untrained) policy.
       key: PRNG key (terrain map, policy init, episodes).
       progress: optional tqdm bar, advanced by the episodes of each batch.
+      return_outcomes: also return each level's per-episode outcomes (the (n,) arrays of
+        first_episode_outcomes, episode i of every level and every evaluation with the same
+        draws (results.draws_fingerprint, eval.seed, eval.num_envs, eval.episodes) is the same
+        draw).
 
     Returns:
-      One result row (keys RESULT_KEYS) per level, in the order of ``levels``.
+      One result row (keys RESULT_KEYS) per level, in the order of ``levels``; with
+      ``return_outcomes`` a pair (rows, outcomes), one outcome dict per row.
     """
     check_source(source, allow_all=False)
     levels = check_levels(perturbation, levels)
@@ -207,7 +213,7 @@ def evaluate_sweep(
     key_map, key_init, key_run = jax.random.split(key, 3)
     traced = perturbation in TRACED_PERTURBATIONS
     groups = [levels] if traced or perturbation == "none" else [(lv,) for lv in levels]
-    rows = []
+    rows, outcomes = [], []
     for group in groups:
         env, networks, params, normalizer = make_eval_env_and_policy(
             cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
@@ -233,7 +239,8 @@ def evaluate_sweep(
                     progress.update(take)
             merged = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
             rows.append(summarize(source, perturbation, level, merged))
-    return rows
+            outcomes.append(merged)
+    return (rows, outcomes) if return_outcomes else rows
 
 
 def sweep_plan(
@@ -271,12 +278,17 @@ def sweep_plan(
     return plan
 
 
-def run_sweeps(cfg, plan, checkpoint: str | None, key: jax.Array, progress=None) -> list[dict]:
+def run_sweeps(
+    cfg, plan, checkpoint: str | None, key: jax.Array, progress=None, return_outcomes=False
+):
     """Result rows of every sweep of ``plan`` (sweep_plan), all with the same ``key``: every
-    cell sees the same map and draws."""
-    rows = []
+    cell sees the same map and draws. ``return_outcomes``: (rows, per-episode outcomes per row),
+    as evaluate_sweep."""
+    rows, outcomes = [], []
     for source, perturbation, levels in plan:
         if progress is not None:
             progress.set_postfix(source=source, perturbation=perturbation)
-        rows += evaluate_sweep(cfg, source, perturbation, levels, checkpoint, key, progress)
-    return rows
+        r, o = evaluate_sweep(cfg, source, perturbation, levels, checkpoint, key, progress, True)
+        rows += r
+        outcomes += o
+    return (rows, outcomes) if return_outcomes else rows

@@ -140,6 +140,8 @@ def main(argv):
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")
     print(results.format_table(rows))
+    per_episode = results.episodes_document(list(zip(rows, outcomes, strict=True)), ckpt, draws)
+    print(results.format_terrain_breakdown(results.terrain_breakdown(per_episode)))
     print("[evaluate] wrote " + ", ".join(paths))
 
 

@@ -10,6 +10,7 @@ import math
 import os
 import subprocess
 import sys
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jp
@@ -97,7 +98,13 @@ def test_mcnemar_exact_hand_computed():
 def _episodes_doc(success, failed, seed=0, fingerprint="f"):
     n = len(success)
     cell = {"source": "tof", "perturbation": "none", "level": 0.0}
-    cell |= {"success": success, "failed": failed, "finished": [1] * n, "length": [9] * n}
+    cell |= {
+        "terrain": (["grid_stones", "platform_gap"] * n)[:n],
+        "success": success,
+        "failed": failed,
+        "finished": [1] * n,
+        "length": [9] * n,
+    }
     cell["mean_speed_ms"] = [0.5] * n
     draws = {"seed": seed, "num_envs": n, "episodes": n, "fingerprint": fingerprint}
     return {"schema_version": 1, "checkpoint": "x", "draws": draws, "cells": [cell]}
@@ -111,6 +118,21 @@ def test_paired_cells_hand_checked():
     assert row["p_value"] == pytest.approx(2 * (1 + 11) / 2048)  # 11 discordant, 1 the other way
     assert (row["falls_a"], row["falls_b"], row["episodes"]) == (5, 9, 18)
     assert "McNemar" in paired.format_table([row])
+    grid, gap = results.terrain_breakdown(a)  # even episodes grid stones, odd ones gaps
+    # grid: successes at 0 2 4 6 8 16, falls at 10 12 14; gap: successes at 1 3 5 7 9 15 17
+    assert (grid["terrain"], grid["episodes"], grid["successes"], grid["falls"]) == (
+        "grid_stones",
+        9,
+        6,
+        3,
+    )
+    assert (gap["terrain"], gap["episodes"], gap["successes"], gap["falls"]) == (
+        "platform_gap",
+        9,
+        7,
+        2,
+    )
+    assert "platform_gap" in results.format_terrain_breakdown([grid, gap])
     with pytest.raises(ValueError, match=r"config .* differs"):
         paired.pair_cells(a, _episodes_doc([0] * 18, [0] * 18, fingerprint="g"))
 
@@ -233,6 +255,10 @@ def test_cli_bad_input(args, message, tmp_path):
     assert len(err_lines) == 1 and message in err_lines[0], p.stderr[-2000:]
 
 
+class _Task(NamedTuple):  # the part of the env's task state the rollout reads
+    col: jax.Array
+
+
 class _ConstantObsEnv:
     """Single env whose observation is always zero and whose episodes last 4 steps; at the last
     step 'episode/speed_ms' reads the first action component (what the rollout acted)."""
@@ -245,13 +271,14 @@ class _ConstantObsEnv:
 
         z = jp.zeros(())
         metrics = {"episode/success": z, "episode/failed": z, "episode/speed_ms": z}
-        return State(None, jp.zeros(3), z, z, metrics, {"t": jp.zeros((), jp.int32)})
+        info = {"t": jp.zeros((), jp.int32), "task": _Task(jp.int32(3))}
+        return State(None, jp.zeros(3), z, z, metrics, info)
 
     def step(self, state, action):
         t = state.info["t"] + 1
         done = t >= 4
         metrics = dict(state.metrics, **{"episode/speed_ms": jp.where(done, action[0], 0.0)})
-        info = {"t": jp.where(done, 0, t)}
+        info = {"t": jp.where(done, 0, t), "task": state.info["task"]}
         return state.replace(done=done.astype(jp.float32), metrics=metrics, info=info)
 
 
@@ -269,7 +296,10 @@ def test_rollout_acts_with_the_mean_or_samples_at_the_capped_std(deterministic):
         cfg, env, jp.zeros((1, 3)), None, jax.random.PRNGKey(0)
     )
     rollout = rb.make_rollout(env, networks, 1024, 8, deterministic=deterministic)
-    done, _, _, speed = jax.device_get(rollout(params, normalizer, jax.random.PRNGKey(1), 0.0))
+    (done, _, _, speed), col = jax.device_get(
+        rollout(params, normalizer, jax.random.PRNGKey(1), 0.0)
+    )
+    assert col.shape == (1024,) and (col == 3).all()
     acted = speed[done > 0.5]  # 2 episodes x 1024 envs
     assert acted.shape == (2048,)
     if deterministic:
@@ -283,6 +313,8 @@ def test_rollout_acts_with_the_mean_or_samples_at_the_capped_std(deterministic):
 @pytest.fixture(scope="module")
 def e2e(tmp_path_factory):
     cfg = tiny_cfg()
+    cfg.eval.stone_types = ("mixed_row_stones",)  # 5 columns: 4 mixed-row stones, 1 gap
+    cfg.eval.gap_types = ("platform_gap",)
     out = str(tmp_path_factory.mktemp("eval"))
     rows, outcomes = rb.evaluate_sweep(
         cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0), return_outcomes=True
@@ -348,6 +380,12 @@ def test_per_episode_outcomes_match_the_rows_and_pair_with_themselves(e2e, tmp_p
         assert all(len(cell[k]) == 4 for k in results.EPISODE_KEYS)
         assert sum(cell["success"]) == row["successes"] and sum(cell["failed"]) == row["falls"]
         assert np.mean(cell["mean_speed_ms"]) == pytest.approx(row["mean_speed_ms"], abs=1e-3)
+    terrains = [t for c in doc["cells"] for t in c["terrain"]]
+    assert set(terrains) <= {"mixed_row_stones", "platform_gap"}
+    assert doc["cells"][0]["terrain"] == doc["cells"][1]["terrain"]  # same draws at each level
+    by_type = results.terrain_breakdown(doc)
+    assert sum(r["episodes"] for r in by_type) == 8
+    assert sum(r["successes"] for r in by_type) == sum(r["successes"] for r in rows)
     same = paired.pair_folders(out, out)
     assert [(r["a_only"], r["b_only"], r["p_value"]) for r in same] == [(0, 0, 1.0)] * 2
     assert [r["successes_a"] for r in same] == [r["successes"] for r in rows]

@@ -30,7 +30,7 @@ TOP_KEYS = ("schema_version", "checkpoint", "episode_length_s", "results")
 # Per-episode outcomes (episodes_<source>_<perturbation>.json), for paired comparisons of two
 # policies on the same episode draws (foottof.eval.paired).
 EPISODES_SCHEMA_VERSION = 1
-EPISODE_KEYS = ("success", "failed", "finished", "length", "mean_speed_ms")  # (n,) per cell
+EPISODE_KEYS = ("terrain", "success", "failed", "finished", "length", "mean_speed_ms")  # (n,)
 # Config sections that decide the episode draws (map, spawn/goal, sensor noise) and outcomes of an
 # evaluation; the policy's own sections (ppo, network, train) and the top-level training seed
 # do not. Leaves of c.eval that only choose what runs or where it goes are left out too.
@@ -134,9 +134,12 @@ def episodes_document(cells: list[tuple[dict, dict]], checkpoint: str | None, dr
             v = np.asarray(outcomes[k])
             if v.shape != (n,):
                 raise ValueError(f"episode outcome {k!r} has shape {v.shape}; expected ({n},)")
-            cell[k] = (
-                [round(float(x), 4) for x in v] if k == "mean_speed_ms" else v.astype(int).tolist()
-            )
+            if k == "terrain":
+                cell[k] = [str(x) for x in v]
+            elif k == "mean_speed_ms":
+                cell[k] = [round(float(x), 4) for x in v]
+            else:
+                cell[k] = v.astype(int).tolist()
         if sum(cell["success"]) != row["successes"] or sum(cell["failed"]) != row["falls"]:
             raise ValueError(
                 f"episode outcomes of {cell['source']}/{cell['perturbation']} "
@@ -149,6 +152,43 @@ def episodes_document(cells: list[tuple[dict, dict]], checkpoint: str | None, dr
         "draws": dict(draws),
         "cells": out,
     }
+
+
+def terrain_breakdown(episodes_doc: dict) -> list[dict]:
+    """Per cell and terrain type of an episodes document: episodes, successes, falls, rate."""
+    rows = []
+    for cell in episodes_doc["cells"]:
+        for t in dict.fromkeys(cell["terrain"]):  # types in order of first appearance
+            idx = [i for i, x in enumerate(cell["terrain"]) if x == t]
+            k = sum(cell["success"][i] for i in idx)
+            rows.append(
+                {
+                    "source": cell["source"],
+                    "perturbation": cell["perturbation"],
+                    "level": cell["level"],
+                    "terrain": t,
+                    "episodes": len(idx),
+                    "successes": k,
+                    "success_rate": k / len(idx),
+                    "falls": sum(cell["failed"][i] for i in idx),
+                }
+            )
+    return rows
+
+
+def format_terrain_breakdown(rows: list[dict]) -> str:
+    """Human-readable terrain_breakdown."""
+    head = (
+        f"{'source':<11}{'perturbation':<14}{'level':>7}  {'terrain':<18}{'episodes':>9}"
+        f"{'success':>9}{'rate':>7}{'falls':>7}"
+    )
+    lines = [head, "-" * len(head)]
+    for r in rows:
+        lines.append(
+            f"{r['source']:<11}{r['perturbation']:<14}{r['level']:>7.3g}  {r['terrain']:<18}"
+            f"{r['episodes']:>9d}{r['successes']:>9d}{r['success_rate']:>7.3f}{r['falls']:>7d}"
+        )
+    return "\n".join(lines)
 
 
 def episodes_basename(source: str, perturbation: str) -> str:

@@ -26,6 +26,7 @@ import numpy as np
 from foottof.eval.harness import make_eval_env_and_policy, perturbed_reset
 from foottof.eval.results import summarize
 from foottof.perception import check_source
+from foottof.terrain import TERRAIN_TYPES
 
 PERTURBATIONS = ("none", "joint_offset", "shank_length", "odometry")
 LEVEL_RANGES = {  # valid closed range of the levels of each perturbation
@@ -131,7 +132,8 @@ def make_rollout(
     perturbation: str = "none",
     deterministic: bool = True,
 ):
-    """jit-ed (params, normalizer, key, level) -> per-step (T, B) arrays done/success/failed/speed.
+    """jit-ed (params, normalizer, key, level) -> (per-step (T, B) arrays done/success/failed/
+    speed, (B,) terrain column of each env's first episode).
 
     ``deterministic``: act with the policy mean (the default), or sample actions at the policy's
     action std as in training (``eval.deterministic=False``: what the curriculum sees).
@@ -166,8 +168,9 @@ def make_rollout(
             )
             return (state, carry, state.done > 0.5), out
 
+        col = state.info["task"].col  # the tile column of the first episode (its terrain type)
         _, outs = jax.lax.scan(body, (state, carry, first), jax.random.split(key_run, steps))
-        return outs
+        return outs, col
 
     return jax.jit(rollout)
 
@@ -196,7 +199,8 @@ def evaluate_sweep(
       key: PRNG key (terrain map, policy init, episodes).
       progress: optional tqdm bar, advanced by the episodes of each batch.
       return_outcomes: also return each level's per-episode outcomes (the (n,) arrays of
-        first_episode_outcomes, episode i of every level and every evaluation with the same
+        first_episode_outcomes and ``terrain``, the terrain type name of the episode's tile;
+        episode i of every level and every evaluation with the same
         draws (results.draws_fingerprint, eval.seed, eval.num_envs, eval.episodes) is the same
         draw).
 
@@ -213,11 +217,13 @@ def evaluate_sweep(
     key_map, key_init, key_run = jax.random.split(key, 3)
     traced = perturbation in TRACED_PERTURBATIONS
     groups = [levels] if traced or perturbation == "none" else [(lv,) for lv in levels]
+    type_names = np.asarray(TERRAIN_TYPES)
     rows, outcomes = [], []
     for group in groups:
         env, networks, params, normalizer = make_eval_env_and_policy(
             cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
         )
+        col_type = jax.device_get(env.tmap.col_type)
         rollout = make_rollout(
             env,
             networks,
@@ -230,8 +236,9 @@ def evaluate_sweep(
             parts, collected, k_run = [], 0, key_run
             while collected < episodes:
                 k_run, k = jax.random.split(k_run)
-                outs = jax.device_get(rollout(params, normalizer, k, jp.float32(level)))
+                outs, col = jax.device_get(rollout(params, normalizer, k, jp.float32(level)))
                 res = first_episode_outcomes(*outs)
+                res["terrain"] = type_names[np.asarray(col_type)[col]]
                 take = min(num_envs, episodes - collected)
                 parts.append({n: v[:take] for n, v in res.items()})
                 collected += take

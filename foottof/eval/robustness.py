@@ -198,11 +198,10 @@ def evaluate_sweep(
       checkpoint: checkpoint path, or None for a freshly initialized (untrained) policy.
       key: PRNG key (terrain map, policy init, episodes).
       progress: optional tqdm bar, advanced by the episodes of each batch.
-      return_outcomes: also return each level's per-episode outcomes (the (n,) arrays of
-        first_episode_outcomes and ``terrain``, the terrain type name of the episode's tile;
-        episode i of every level and every evaluation with the same
-        draws (results.draws_fingerprint, eval.seed, eval.num_envs, eval.episodes) is the same
-        draw).
+      return_outcomes: also return each level's per-episode outcomes: the (n,) arrays of
+        first_episode_outcomes and ``terrain`` (the terrain type name of the episode's tile).
+        Episode i is the same draw at every level, and in every evaluation with the same
+        results.episode_draws (eval.seed, batch size, eval.episodes, draws_fingerprint).
 
     Returns:
       One result row (keys RESULT_KEYS) per level, in the order of ``levels``; with
@@ -223,7 +222,7 @@ def evaluate_sweep(
         env, networks, params, normalizer = make_eval_env_and_policy(
             cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
         )
-        col_type = jax.device_get(env.tmap.col_type)
+        col_type = np.asarray(jax.device_get(env.tmap.col_type))  # (C,) type index per column
         rollout = make_rollout(
             env,
             networks,
@@ -238,7 +237,7 @@ def evaluate_sweep(
                 k_run, k = jax.random.split(k_run)
                 outs, col = jax.device_get(rollout(params, normalizer, k, jp.float32(level)))
                 res = first_episode_outcomes(*outs)
-                res["terrain"] = type_names[np.asarray(col_type)[col]]
+                res["terrain"] = type_names[col_type[col]]
                 take = min(num_envs, episodes - collected)
                 parts.append({n: v[:take] for n, v in res.items()})
                 collected += take

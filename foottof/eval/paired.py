@@ -24,6 +24,7 @@ import math
 import os
 
 from foottof.eval import results
+from foottof.ppo.compare import parse_branch  # NAME=DIR, as the A/B tool of training runs
 
 PAIRED_KEYS = (  # CSV columns of --out
     "source",
@@ -156,15 +157,6 @@ def format_table(rows: list[dict], names=("a", "b")) -> str:
     return "\n".join(lines)
 
 
-def _parse(arg: str) -> tuple[str, str]:
-    name, sep, path = arg.partition("=")
-    if not sep:
-        name, path = os.path.basename(os.path.normpath(arg)), arg
-    if not name or not path:
-        raise ValueError(f"{arg!r}: expected NAME=OUT_DIR")
-    return name, path
-
-
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("a", help="NAME=OUT_DIR of the first evaluation (evaluate.py --out)")
@@ -172,7 +164,7 @@ def main(argv=None) -> None:
     ap.add_argument("--out", help="write the paired rows as CSV")
     args = ap.parse_args(argv)
     try:
-        (na, da), (nb, db) = _parse(args.a), _parse(args.b)
+        (na, da), (nb, db) = parse_branch(args.a), parse_branch(args.b)
         rows = pair_folders(da, db, (na, nb))
     except (ValueError, FileNotFoundError) as e:
         raise SystemExit(f"error: {e}") from None

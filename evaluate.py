@@ -135,7 +135,15 @@ def main(argv):
             rows, outcomes = rb.run_sweeps(cfg, plan, ckpt, key, bar, return_outcomes=True)
         draws = results.episode_draws(cfg)
         paths = results.write_run(
-            out, _SOURCE.value, pert, rows, ckpt, float(cfg.env.episode_length_s), outcomes, draws
+            out,
+            _SOURCE.value,
+            pert,
+            rows,
+            ckpt,
+            float(cfg.env.episode_length_s),
+            outcomes,
+            draws,
+            results.ensemble_setting(cfg),
         )
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")

@@ -201,6 +201,79 @@ def test_robustness_png_panels_without_data():
     assert png != plots.robustness_png([])
 
 
+def _row(source, perturbation, level, k, n=10):
+    lo, hi = results.wilson_interval(k, n)
+    return {
+        "source": source, "perturbation": perturbation, "level": level, "episodes": n,
+        "successes": k, "success_rate": k / n, "ci_low": lo, "ci_high": hi,
+        "mean_speed_ms": 0.5, "falls": 1,
+    }  # fmt: skip
+
+
+def test_ensemble_is_recorded_and_captioned():
+    cfg = smoke.get_config()
+    cfg.eval.difficulty_fraction = 0.125
+    e = results.ensemble_setting(cfg)
+    assert tuple(e) == results.ENSEMBLE_KEYS
+    assert e["difficulty_fraction"] == 0.125 and e["deterministic"] is True
+    assert e["fingerprint"] == results.draws_fingerprint(cfg)
+    doc = results.results_document([_row("tof", "odometry", 0.0, 5)], None, 10.0, e)
+    assert doc["schema_version"] == 2 and doc["ensemble"] == e
+    rows = [_row("tof", "odometry", 0.0, 5, n=200), _row("tof", "odometry", 2.0, 3, n=200)]
+    assert results.ensemble_caption(e, rows) == (
+        "ensemble: 80 % stepping stones + 20 % gaps at 12.5 % of the stage-1 difficulty range, "
+        "mean actions, 200 episodes per cell"
+    )
+    with pytest.raises(ValueError, match="ensemble keys"):
+        results.results_document([], None, 10.0, {"difficulty_fraction": 0.9})
+
+
+def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
+    drawn = []
+    monkeypatch.setattr(
+        plots,
+        "robustness_png",
+        lambda rows, caption, left_out: drawn.append((rows, caption, left_out)) or b"png",
+    )
+    cfg = smoke.get_config()
+    easy = results.ensemble_setting(cfg)
+    cfg.eval.difficulty_fraction = 0.125
+    hard = results.ensemble_setting(cfg)
+    assert easy["fingerprint"] != hard["fingerprint"]
+    out = str(tmp_path)
+
+    def write(source, pert, ensemble):
+        rows = [_row(source, pert, 0.0, 4)]
+        results.write_results(
+            out, source, pert, results.results_document(rows, None, 10.0, ensemble)
+        )
+
+    write("tof", "odometry", easy)
+    write("mock_aggre", "odometry", easy)
+    rows, caption, left_out = drawn[-1]
+    assert sorted(r["source"] for r in rows) == ["mock_aggre", "tof"] and left_out == []
+    assert "90 % of the stage-1" in caption
+    write("tof", "joint_offset", hard)  # another ensemble: the two files above are not drawn
+    rows, caption, left_out = drawn[-1]
+    assert [(r["source"], r["perturbation"]) for r in rows] == [("tof", "joint_offset")]
+    assert left_out == ["results_mock_aggre_odometry.json", "results_tof_odometry.json"]
+    assert "12.5 % of the stage-1" in caption
+    old = json.loads((tmp_path / "results_tof_odometry.json").read_text())
+    del old["ensemble"]  # schema 1 (no ensemble): not drawn with anything else
+    (tmp_path / "results_tof_odometry.json").write_text(json.dumps(old))
+    write("mock_aggre", "odometry", easy)
+    rows, _, left_out = drawn[-1]
+    assert [r["source"] for r in rows] == ["mock_aggre"]
+    assert left_out == ["results_tof_joint_offset.json", "results_tof_odometry.json"]
+
+
+def test_robustness_png_with_caption_and_left_out_files():
+    rows = [_row("tof", "odometry", 0.0, 9), _row("tof", "odometry", 2.0, 5)]
+    plain = plots.robustness_png(rows)
+    captioned = plots.robustness_png(rows, "ensemble: test", ["results_x_odometry.json"])
+    assert captioned[:8] == b"\x89PNG\r\n\x1a\n" and captioned != plain
+
+
 def test_default_sweep_is_the_sources_headline_sweep():
     e = tiny_cfg().eval
     odo, joint = tuple(e.odometry_levels), tuple(e.joint_offset_levels)
@@ -328,6 +401,7 @@ def e2e(tmp_path_factory):
         cfg.env.episode_length_s,
         outcomes,
         results.episode_draws(cfg),
+        results.ensemble_setting(cfg),
     )
     paths = {
         "json": os.path.join(out, "results_mock_ideal_odometry.json"),
@@ -340,7 +414,7 @@ def e2e(tmp_path_factory):
 
 
 def test_end_to_end_writes_outputs(e2e):
-    _, out, rows, paths = e2e
+    cfg, out, rows, paths = e2e
     assert sorted(os.listdir(out)) == [
         "episodes_mock_ideal_odometry.json",
         "results_mock_ideal_odometry.csv",
@@ -350,6 +424,7 @@ def test_end_to_end_writes_outputs(e2e):
     with open(paths["json"]) as f:
         doc = json.load(f)
     assert tuple(doc) == results.TOP_KEYS  # schema: exact key sets
+    assert doc["schema_version"] == 2 and doc["ensemble"] == results.ensemble_setting(cfg)
     assert len(doc["results"]) == 2
     for r, level in zip(doc["results"], (0.0, 2.0), strict=True):
         assert tuple(r) == results.RESULT_KEYS

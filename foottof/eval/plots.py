@@ -35,7 +35,9 @@ def _png(plt, fig) -> bytes:
     return buf.getvalue()
 
 
-def robustness_png(rows: list[dict]) -> bytes:
+def robustness_png(
+    rows: list[dict], caption: str | None = None, left_out: tuple | list = ()
+) -> bytes:
     """Success rate vs. perturbation level, one panel per perturbation, one line per source.
 
     Args:
@@ -43,19 +45,28 @@ def robustness_png(rows: list[dict]) -> bytes:
         Error bars are the 95 % Wilson intervals; sources are drawn 1 % of the level span apart
         so that equal rates stay visible. Only panels with rows are drawn; a line under them
         names the command that fills each missing one (all three missing: that line alone).
+      caption: what was evaluated (foottof.eval.results.ensemble_caption), drawn above the
+        panels.
+      left_out: names of results files not drawn (another ensemble), listed under the panels.
     """
     full = [(p, t, x) for p, t, x in PANELS if any(r["perturbation"] == p for r in rows)]
     missing = [(p, t) for p, t, _ in PANELS if p not in {q for q, _, _ in full}]
     note = "not run yet: " + "; ".join(
         f"{t.split(maxsplit=1)[1]} ({FILL_COMMAND.format(p)})" for p, t in missing
     )
+    if left_out:
+        note = (note + "\n" if missing else "") + (
+            "not drawn (another ensemble): " + ", ".join(left_out)
+        )
     if not full:
         plt, (fig, ax) = _figure(1, 1, figsize=(9, 2.5))
         ax.axis("off")
         ax.text(
             0.5,
             0.5,
-            "no perturbation sweep in this folder\n" + note.replace("; ", "\n"),
+            "no perturbation sweep in this folder\n"
+            + note.replace("; ", "\n")
+            + (f"\n{caption}" if caption else ""),
             ha="center",
             va="center",
             transform=ax.transAxes,
@@ -97,8 +108,11 @@ def robustness_png(rows: list[dict]) -> bytes:
         ax.legend(fontsize=8)
     axes[0].set_ylabel("success rate")
     fig.tight_layout()
-    if missing:
-        fig.subplots_adjust(bottom=0.24)
+    if caption:
+        fig.subplots_adjust(top=0.82)
+        fig.text(0.01, 0.99, caption, fontsize=8, color="0.2", ha="left", va="top", wrap=True)
+    if missing or left_out:
+        fig.subplots_adjust(bottom=0.24 + 0.05 * (bool(missing) and bool(left_out)))
         fig.text(0.01, 0.01, note, fontsize=8, color="0.3", ha="left", va="bottom", wrap=True)
     return _png(plt, fig)
 

@@ -12,7 +12,7 @@ import os
 
 import numpy as np
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2  # 2: adds "ensemble" (what was evaluated: difficulty, stone share, actions)
 RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
     "source",
     "perturbation",
@@ -25,7 +25,15 @@ RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
     "mean_speed_ms",
     "falls",
 )
-TOP_KEYS = ("schema_version", "checkpoint", "episode_length_s", "results")
+TOP_KEYS = ("schema_version", "checkpoint", "episode_length_s", "ensemble", "results")
+ENSEMBLE_KEYS = (  # exact key set of the "ensemble" entry (ensemble_setting)
+    "difficulty_fraction",
+    "stone_fraction",
+    "stone_types",
+    "gap_types",
+    "deterministic",
+    "fingerprint",
+)
 
 # Per-episode outcomes (episodes_<source>_<perturbation>.json), for paired comparisons of two
 # policies on the same episode draws (foottof.eval.paired).
@@ -80,17 +88,53 @@ def summarize(source: str, perturbation: str, level: float, outcomes: dict) -> d
     }
 
 
-def results_document(rows: list[dict], checkpoint: str | None, episode_length_s: float) -> dict:
-    """The results JSON document (keys TOP_KEYS; each row keys RESULT_KEYS)."""
+def results_document(
+    rows: list[dict], checkpoint: str | None, episode_length_s: float, ensemble: dict
+) -> dict:
+    """The results JSON document (keys TOP_KEYS; each row keys RESULT_KEYS; ``ensemble`` from
+    :func:`ensemble_setting`)."""
     for r in rows:
         if tuple(r) != RESULT_KEYS:
             raise ValueError(f"result row keys {tuple(r)} differ from {RESULT_KEYS}")
+    if tuple(ensemble) != ENSEMBLE_KEYS:
+        raise ValueError(f"ensemble keys {tuple(ensemble)} differ from {ENSEMBLE_KEYS}")
     return {
         "schema_version": SCHEMA_VERSION,
         "checkpoint": checkpoint or "untrained (fresh init)",
         "episode_length_s": float(episode_length_s),
+        "ensemble": ensemble,
         "results": rows,
     }
+
+
+def ensemble_setting(cfg) -> dict:
+    """What an evaluation ran on (the results file's "ensemble"): eval.difficulty_fraction,
+    stone_fraction, stone/gap types, deterministic, and draws_fingerprint (equal fingerprints:
+    the same terrain, episode draws and env settings). Only results of equal settings share a
+    figure."""
+    e = cfg.eval
+    return {
+        "difficulty_fraction": float(e.difficulty_fraction),
+        "stone_fraction": float(e.stone_fraction),
+        "stone_types": list(e.stone_types),
+        "gap_types": list(e.gap_types),
+        "deterministic": bool(e.deterministic),
+        "fingerprint": draws_fingerprint(cfg),
+    }
+
+
+def ensemble_caption(ensemble: dict, rows: list[dict]) -> str:
+    """One line naming what a figure shows, e.g. 'ensemble: 80 % stepping stones + 20 % gaps at
+    90 % of the stage-1 difficulty range, mean actions, 1000 episodes per cell'."""
+    stones = round(100 * ensemble["stone_fraction"])
+    counts = sorted({int(r["episodes"]) for r in rows})
+    per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    actions = "mean actions" if ensemble["deterministic"] else "sampled actions"
+    return (
+        f"ensemble: {stones} % stepping stones + {100 - stones} % gaps at "
+        f"{100 * ensemble['difficulty_fraction']:g} % of the stage-1 difficulty range, {actions}, "
+        f"{per_cell} episodes per cell"
+    )
 
 
 def draws_fingerprint(cfg) -> str:
@@ -246,8 +290,9 @@ def result_basename(source: str, perturbation: str) -> str:
 def write_results(
     out_dir: str, source_flag: str, perturbation: str, doc: dict, episodes: dict | None = None
 ) -> dict:
-    """Writes results_<source>_<perturbation>.{json,csv} and robustness.png (all results in
-    out_dir on shared axes), and with ``episodes`` (episodes_document) the per-episode outcomes
+    """Writes results_<source>_<perturbation>.{json,csv} and robustness.png (the results in
+    out_dir of the same ensemble as ``doc`` on shared axes, captioned with it; files of another
+    ensemble are named under the figure, not drawn), and with ``episodes`` (episodes_document) the per-episode outcomes
     episodes_<source>_<perturbation>.json; returns {kind: path}."""
     from foottof.eval.plots import robustness_png
 
@@ -264,20 +309,26 @@ def write_results(
     others = [p for p in glob.glob(os.path.join(out_dir, "results_*.json")) if p != paths["json"]]
     rows = list(doc["results"])
     seen = {(r["source"], r["perturbation"], r["level"]) for r in rows}
+    left_out = []  # results files of another ensemble (or an older schema): not on this figure
     for p in sorted(others, key=os.path.getmtime, reverse=True):  # newest first wins
         try:
             with open(p) as f:
-                more = [r for r in json.load(f)["results"] if tuple(r) == RESULT_KEYS]
+                other = json.load(f)
+            more = [r for r in other["results"] if tuple(r) == RESULT_KEYS]
         except (OSError, ValueError, KeyError, TypeError):
             continue  # a foreign or damaged file: not plotted
+        if other.get("ensemble") != doc["ensemble"]:
+            left_out.append(os.path.basename(p))
+            continue
         for r in more:
             if (r["source"], r["perturbation"], r["level"]) not in seen:
                 seen.add((r["source"], r["perturbation"], r["level"]))
                 rows.append(r)
+    caption = ensemble_caption(doc["ensemble"], rows)
     files = {
         paths["json"]: json.dumps(doc, indent=2).encode(),
         paths["csv"]: csv_text(doc["results"]).encode(),
-        paths["png"]: robustness_png(rows),
+        paths["png"]: robustness_png(rows, caption, sorted(left_out)),
     }
     if episodes is not None:
         files[paths["episodes"]] = json.dumps(episodes).encode()
@@ -294,14 +345,18 @@ def write_run(
     episode_length_s: float,
     episodes: list[dict] | None = None,
     draws: dict | None = None,
+    ensemble: dict | None = None,
 ) -> list[str]:
     """Writes the rows of one evaluate.py run (write_results); returns the paths written.
 
     One results file named by the --perturbation flag; without the flag (each source's default
     sweep) one file per perturbation that ran, so a later explicit run of it replaces it.
     ``episodes`` (the first-episode outcomes of each row, in row order) and ``draws`` (see
-    episodes_document) add the per-episode file next to each results file.
+    episodes_document) add the per-episode file next to each results file. ``ensemble``
+    (:func:`ensemble_setting`) is required.
     """
+    if ensemble is None:
+        raise ValueError("write_run needs the ensemble setting (results.ensemble_setting(cfg))")
     if episodes is not None and (draws is None or len(episodes) != len(rows)):
         raise ValueError("per-episode outcomes need draws and one outcome set per result row")
     names = (
@@ -312,7 +367,7 @@ def write_run(
     paths = []
     for name in names:
         idx = [i for i, r in enumerate(rows) if perturbation_flag or r["perturbation"] == name]
-        doc = results_document([rows[i] for i in idx], checkpoint, episode_length_s)
+        doc = results_document([rows[i] for i in idx], checkpoint, episode_length_s, ensemble)
         ep_doc = (
             None
             if episodes is None

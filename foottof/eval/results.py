@@ -292,8 +292,8 @@ def write_results(
 ) -> dict:
     """Writes results_<source>_<perturbation>.{json,csv} and robustness.png (the results in
     out_dir of the same ensemble as ``doc`` on shared axes, captioned with it; files of another
-    ensemble are named under the figure, not drawn), and with ``episodes`` (episodes_document) the per-episode outcomes
-    episodes_<source>_<perturbation>.json; returns {kind: path}."""
+    ensemble are named under the figure, not drawn), and with ``episodes`` (episodes_document)
+    the per-episode outcomes episodes_<source>_<perturbation>.json; returns {kind: path}."""
     from foottof.eval.plots import robustness_png
 
     base = os.path.join(out_dir, result_basename(source_flag, perturbation))

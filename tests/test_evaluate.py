@@ -224,6 +224,8 @@ def test_ensemble_is_recorded_and_captioned():
         "ensemble: 80 % stepping stones + 20 % gaps at 12.5 % of the stage-1 difficulty range, "
         "mean actions, 200 episodes per cell"
     )
+    assert results.ensemble_caption(e, rows, ["a", "b", "a"]).endswith("; policies: a, b")
+    assert results.ensemble_caption(e, rows, ["run/x"]).endswith("per cell; policy: run/x")
     with pytest.raises(ValueError, match="ensemble keys"):
         results.results_document([], None, 10.0, {"difficulty_fraction": 0.9})
 
@@ -242,17 +244,16 @@ def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
     assert easy["fingerprint"] != hard["fingerprint"]
     out = str(tmp_path)
 
-    def write(source, pert, ensemble):
+    def write(source, pert, ensemble, checkpoint=None):
         rows = [_row(source, pert, 0.0, 4)]
-        results.write_results(
-            out, source, pert, results.results_document(rows, None, 10.0, ensemble)
-        )
+        doc = results.results_document(rows, checkpoint, 10.0, ensemble)
+        results.write_results(out, source, pert, doc)
 
-    write("tof", "odometry", easy)
-    write("mock_aggre", "odometry", easy)
+    write("tof", "odometry", easy, "runs/a")
+    write("mock_aggre", "odometry", easy, "runs/b")
     rows, caption, left_out = drawn[-1]
     assert sorted(r["source"] for r in rows) == ["mock_aggre", "tof"] and left_out == []
-    assert "90 % of the stage-1" in caption
+    assert "90 % of the stage-1" in caption and caption.endswith("policies: runs/b, runs/a")
     write("tof", "joint_offset", hard)  # another ensemble: the two files above are not drawn
     rows, caption, left_out = drawn[-1]
     assert [(r["source"], r["perturbation"]) for r in rows] == [("tof", "joint_offset")]

@@ -123,18 +123,24 @@ def ensemble_setting(cfg) -> dict:
     }
 
 
-def ensemble_caption(ensemble: dict, rows: list[dict]) -> str:
+def ensemble_caption(ensemble: dict, rows: list[dict], checkpoints: list[str] = ()) -> str:
     """One line naming what a figure shows, e.g. 'ensemble: 80 % stepping stones + 20 % gaps at
-    90 % of the stage-1 difficulty range, mean actions, 1000 episodes per cell'."""
+    90 % of the stage-1 difficulty range, mean actions, 1000 episodes per cell; policy:
+    policies/latest' (``checkpoints``: those of the drawn results files, in order; more than one
+    are all named)."""
     stones = round(100 * ensemble["stone_fraction"])
     counts = sorted({int(r["episodes"]) for r in rows})
     per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
     actions = "mean actions" if ensemble["deterministic"] else "sampled actions"
-    return (
+    text = (
         f"ensemble: {stones} % stepping stones + {100 - stones} % gaps at "
         f"{100 * ensemble['difficulty_fraction']:g} % of the stage-1 difficulty range, {actions}, "
         f"{per_cell} episodes per cell"
     )
+    names = list(dict.fromkeys(checkpoints))
+    if names:
+        text += ("; policy: " if len(names) == 1 else "; policies: ") + ", ".join(names)
+    return text
 
 
 def draws_fingerprint(cfg) -> str:
@@ -310,6 +316,7 @@ def write_results(
     rows = list(doc["results"])
     seen = {(r["source"], r["perturbation"], r["level"]) for r in rows}
     left_out = []  # results files of another ensemble (or an older schema): not on this figure
+    checkpoints = [doc["checkpoint"]]
     for p in sorted(others, key=os.path.getmtime, reverse=True):  # newest first wins
         try:
             with open(p) as f:
@@ -320,11 +327,13 @@ def write_results(
         if other.get("ensemble") != doc["ensemble"]:
             left_out.append(os.path.basename(p))
             continue
-        for r in more:
-            if (r["source"], r["perturbation"], r["level"]) not in seen:
-                seen.add((r["source"], r["perturbation"], r["level"]))
-                rows.append(r)
-    caption = ensemble_caption(doc["ensemble"], rows)
+        drawn = [r for r in more if (r["source"], r["perturbation"], r["level"]) not in seen]
+        for r in drawn:
+            seen.add((r["source"], r["perturbation"], r["level"]))
+            rows.append(r)
+        if drawn:
+            checkpoints.append(str(other.get("checkpoint")))
+    caption = ensemble_caption(doc["ensemble"], rows, checkpoints)
     files = {
         paths["json"]: json.dumps(doc, indent=2).encode(),
         paths["csv"]: csv_text(doc["results"]).encode(),

@@ -143,7 +143,7 @@ def main(argv):
             float(cfg.env.episode_length_s),
             outcomes,
             draws,
-            results.ensemble_setting(cfg),
+            ensemble=results.ensemble_setting(cfg),
         )
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")

@@ -179,28 +179,6 @@ def test_check_inputs():
     assert rb.check_levels("none", []) == (0.0,)
 
 
-def test_robustness_png_panels_without_data():
-    rows = [
-        {
-            "source": s,
-            "perturbation": "odometry",
-            "level": lv,
-            "episodes": 10,
-            "successes": k,
-            "success_rate": k / 10,
-            "ci_low": results.wilson_interval(k, 10)[0],
-            "ci_high": results.wilson_interval(k, 10)[1],
-            "mean_speed_ms": 0.5,
-            "falls": 1,
-        }
-        for s in ("tof", "mock_aggre")
-        for lv, k in ((0.0, 9), (2.0, 5))
-    ]
-    png = plots.robustness_png(rows)
-    assert png[:8] == b"\x89PNG\r\n\x1a\n"
-    assert png != plots.robustness_png([])
-
-
 def _row(source, perturbation, level, k, n=10):
     lo, hi = results.wilson_interval(k, n)
     return {
@@ -208,6 +186,15 @@ def _row(source, perturbation, level, k, n=10):
         "successes": k, "success_rate": k / n, "ci_low": lo, "ci_high": hi,
         "mean_speed_ms": 0.5, "falls": 1,
     }  # fmt: skip
+
+
+def test_robustness_png_panels_without_data():
+    rows = [
+        _row(s, "odometry", lv, k) for s in ("tof", "mock_aggre") for lv, k in ((0.0, 9), (2.0, 5))
+    ]
+    png = plots.robustness_png(rows)
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    assert png != plots.robustness_png([])
 
 
 def test_ensemble_is_recorded_and_captioned():
@@ -402,7 +389,7 @@ def e2e(tmp_path_factory):
         cfg.env.episode_length_s,
         outcomes,
         results.episode_draws(cfg),
-        results.ensemble_setting(cfg),
+        ensemble=results.ensemble_setting(cfg),
     )
     paths = {
         "json": os.path.join(out, "results_mock_ideal_odometry.json"),

@@ -354,7 +354,8 @@ def write_run(
     episode_length_s: float,
     episodes: list[dict] | None = None,
     draws: dict | None = None,
-    ensemble: dict | None = None,
+    *,
+    ensemble: dict,
 ) -> list[str]:
     """Writes the rows of one evaluate.py run (write_results); returns the paths written.
 
@@ -362,10 +363,8 @@ def write_run(
     sweep) one file per perturbation that ran, so a later explicit run of it replaces it.
     ``episodes`` (the first-episode outcomes of each row, in row order) and ``draws`` (see
     episodes_document) add the per-episode file next to each results file. ``ensemble``
-    (:func:`ensemble_setting`) is required.
+    (:func:`ensemble_setting`) is recorded in every results file.
     """
-    if ensemble is None:
-        raise ValueError("write_run needs the ensemble setting (results.ensemble_setting(cfg))")
     if episodes is not None and (draws is None or len(episodes) != len(rows)):
         raise ValueError("per-episode outcomes need draws and one outcome set per result row")
     names = (

@@ -169,13 +169,15 @@ def test_ray_matches_mj_ray(oracle):
 
 
 @pytest.mark.parametrize(
-    "first, max_range", [(0, 0.3), pytest.param(4, R_ORACLE, marks=pytest.mark.slow)]
+    "first, max_range",
+    [(0, 0.3), (None, R_ORACLE), pytest.param(4, R_ORACLE, marks=pytest.mark.slow)],
 )
 def test_adaptive_walk_equals_walking_every_strip(oracle, monkeypatch, first, max_range):
     """The adaptive strip walk (most rays stop after a few strips, the rest are gathered and walk
     on) gives bit-identical distances and normals to every ray walking every strip, for one ray
     set and under vmap (whose rule walks the rays of all batch elements together), also when the
-    unfinished rays need several gathering rounds."""
+    unfinished rays need several gathering rounds and passes (tiny shares), and with the shipped
+    rounds."""
     hf = oracle["hf"]
     fams = _oracle_rays(oracle["h"], np.random.default_rng(2))
     pick = np.random.default_rng(3).permutation(sum(len(v[0]) for v in fams.values()))[:4000]
@@ -183,8 +185,9 @@ def test_adaptive_walk_equals_walking_every_strip(oracle, monkeypatch, first, ma
     d = np.concatenate([v[1] for v in fams.values()])[pick].astype(np.float32)
     d[:7] = 0.0  # zero directions stay misses
     full = jax.jit(lambda o, d: raycast._cast(hf, o, d, max_range, True, adaptive=False))(o, d)
-    monkeypatch.setattr(raycast, "CHUNK_FRACTION", 0.01)  # many rounds
-    monkeypatch.setattr(raycast, "FIRST_STRIPS", first)  # 0: every ray is gathered
+    if first is not None:  # else the shipped raycast.ROUNDS
+        # 0 first strips: every ray is gathered; tiny shares: many passes per round
+        monkeypatch.setattr(raycast, "ROUNDS", ((first, 1.0), (1, 0.01), (3, 0.02), (None, 0.01)))
     one = jax.jit(lambda o, d: raycast._cast(hf, o, d, max_range, True))(o, d)
     batched = jax.jit(
         jax.vmap(lambda o, d: raycast._cast(hf, o, d, max_range, True))  # 40 "envs"

@@ -254,8 +254,12 @@ def _finish(h_flat, hf: Heightfield, o, d, t_tri, g_best, max_range_m: float, wi
     return t_hit, normals[i_c]
 
 
-FIRST_STRIPS = 6  # strips every ray walks before the unfinished rays are gathered
-CHUNK_FRACTION = 0.2  # unfinished rays walked on per round, as a fraction of all rays
+# Rounds of the adaptive walk: (strips, share). Every ray walks the first round's strips; each
+# later round gathers the rays still unfinished, ``share`` of all rays at a time, and walks its
+# strips further (``None``: all that are left). Sized from the stage-1 policy's ToF rays (bench/NOTES.md
+# item 7): unfinished after 2 / 4 / 8 / 14 of the 27 strips: 40 / 20 / 9 / 4 % of the rays; shares
+# with a margin over those were faster (an overflowing round costs a second pass).
+ROUNDS = ((2, 1.0), (2, 0.42), (4, 0.29), (6, 0.15), (None, 0.06))
 
 
 def _surface_full(h_flat, meta: Heightfield, origins, unit, r: float, n_strips: int):
@@ -264,40 +268,51 @@ def _surface_full(h_flat, meta: Heightfield, origins, unit, r: float, n_strips: 
     return t, g
 
 
-def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, first: int, chunk):
-    """The same result as :func:`_surface_full`, with less work: every ray walks its first
-    ``first`` strips; the rays still unfinished (no hit yet, more strips within range and grid)
-    are gathered ``chunk`` at a time and walk the rest, until none is left.
+def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, rounds):
+    """The same result as :func:`_surface_full`, with less work: every ray walks the first
+    round's strips; in each later round the rays still unfinished (no hit yet, more strips within
+    range and grid) are gathered ``share * N`` at a time and walk that round's strips further,
+    until none of them is left; the last round walks all remaining strips.
 
-    Most ToF rays hit within a few strips of the foot (on the evaluation ensemble: 87 % within 6
-    of the 27 strips of a 1 m ray, 95 % within 12), so this is several times fewer strip tests
-    than walking all strips for every ray (ToF rays of 256 envs: 2.7-4x faster, bench/NOTES.md). Exact: strips are crossed in order, so a hit found
-    in an early strip is the first hit (see :func:`_walk`).
+    Most ToF rays hit within a few strips of the foot (stage-1 policy: 60 % within 2 of the 27
+    strips of a 1 m ray, 87 % within 6, 95 % within 12), so this is several times fewer strip
+    tests than walking all strips for every ray (bench/NOTES.md items 3 and 7). Exact: strips are
+    crossed in order, so a hit found in an early strip is the first hit (see :func:`_walk`).
     """
-    first = min(first, n_strips)
+    n = origins.shape[0]
     walk = lambda s0, count: jax.vmap(  # noqa: E731
         lambda o, d: _walk(h_flat, meta, o, d, r, s0, count)
     )
+    first = n_strips if rounds[0][0] is None else min(int(rounds[0][0]), n_strips)
     t, g, more = walk(0, first)(origins, unit)
-    rest = n_strips - first
-    n = origins.shape[0]
-    if rest == 0 or n == 0:
-        return t, g
-    m = max(1, min(n, int(chunk)))
+    done_strips = first
+    for i, (strips, share) in enumerate(rounds[1:], start=1):
+        last = i == len(rounds) - 1 or strips is None
+        count = n_strips - done_strips if last else min(int(strips), n_strips - done_strips)
+        if count <= 0 or n == 0:
+            break
+        m = max(1, min(n, math.ceil(float(share) * n)))
+        s0 = done_strips
 
-    def body(c):
-        t, g, more = c
-        idx = jp.nonzero(more, size=m, fill_value=n)[0]  # n = out of bounds: dropped below
-        o = jp.take(origins, idx, axis=0, mode="clip")
-        d = jp.take(unit, idx, axis=0, mode="clip")
-        t2, g2, _ = walk(first, rest)(o, d)
-        return (
-            t.at[idx].set(t2, mode="drop"),
-            g.at[idx].set(g2, mode="drop"),
-            more.at[idx].set(False, mode="drop"),
+        def body(c, s0=s0, count=count, m=m):
+            t, g, pending, more_next = c
+            idx = jp.nonzero(pending, size=m, fill_value=n)[0]  # n = out of bounds: dropped
+            o = jp.take(origins, idx, axis=0, mode="clip")
+            d = jp.take(unit, idx, axis=0, mode="clip")
+            t2, g2, more2 = walk(s0, count)(o, d)
+            return (
+                t.at[idx].set(t2, mode="drop"),
+                g.at[idx].set(g2, mode="drop"),
+                pending.at[idx].set(False, mode="drop"),
+                more_next.at[idx].set(more2, mode="drop"),
+            )
+
+        t, g, _, more = jax.lax.while_loop(
+            lambda c: jp.any(c[2]), body, (t, g, more, jp.zeros_like(more))
         )
-
-    t, g, _ = jax.lax.while_loop(lambda c: jp.any(c[2]), body, (t, g, more))
+        done_strips += count
+        if last:
+            break
     return t, g
 
 
@@ -311,8 +326,7 @@ def _surface_fn(meta: Heightfield, r: float, n_strips: int):
 
     @custom_vmap
     def surface(h_flat, origins, unit):
-        chunk = math.ceil(CHUNK_FRACTION * origins.shape[0])
-        return _surface_adaptive(h_flat, meta, origins, unit, r, n_strips, FIRST_STRIPS, chunk)
+        return _surface_adaptive(h_flat, meta, origins, unit, r, n_strips, ROUNDS)
 
     @surface.def_vmap
     def _rule(axis_size, in_batched, h_flat, origins, unit):
@@ -374,7 +388,8 @@ def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) 
 
     jit- and vmap-able; ``max_range`` is static (it sets the number of strips,
     ``num_strips(hfield, max_range)``). Each ray walks the strips in order and stops at its first
-    hit: every ray walks ``FIRST_STRIPS``, the unfinished ones walk on in gathered chunks, and
+    hit: every ray walks the first of the ``ROUNDS``, the unfinished ones walk on in gathered
+    chunks, round by round, and
     under ``vmap`` the rays of all batch elements are walked together (``custom_vmap``), so the
     cost follows where the rays actually hit rather than ``max_range``.
 

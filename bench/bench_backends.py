@@ -83,12 +83,16 @@ def _physics_step_time(env, state, steps):
     )
 
 
-def _train_iteration(cfg, physics_name, num_envs, iterations):
+def _train_iteration(cfg, physics_name, num_envs, iterations, sgd_steps=None):
+    """(compile s, env-steps/s) of one training iteration; ``sgd_steps=1``: 1 epoch x 1
+    minibatch instead of the config's update (what the update costs is the difference)."""
     from foottof.ppo import train as train_lib
 
     cfg = cfg.copy_and_resolve_references()
     cfg.env.physics = physics_name
     cfg.ppo.num_envs = num_envs
+    if sgd_steps == 1:
+        cfg.ppo.num_epochs, cfg.ppo.num_minibatches = 1, 1
     env = make_training_env(cfg)
     trainer = train_lib.make_train(env, cfg)
     state = jax.block_until_ready(trainer.init(jax.random.PRNGKey(0)))
@@ -114,6 +118,7 @@ def main():
     p.add_argument("--train_envs", type=int, default=256, help="0: skip the training bench")
     p.add_argument("--train_iterations", type=int, default=3, help="timed iterations")
     p.add_argument("--skip_mjx_at", type=int, default=4096, help="no MJX env at >= this many")
+    p.add_argument("--train_backends", nargs="+", default=["mujoco", "mjx"])
     args = p.parse_args()
     cfg = load_config(args.config)
     cfg.env.physics_threads = args.threads
@@ -132,12 +137,14 @@ def main():
         f"{'envC/bare':>9} {'envC/MJX':>8}  compile s (C phys / env C / env MJX)"
     )
     print(head, flush=True)
+    bare_s = {}  # envs -> seconds per control step of bare C
     for n in args.envs:
         state_c, c_envc, t_envc = _env_step_time(envs["mujoco"], n, args.steps)
         c_phys, t_phys = _physics_step_time(envs["mujoco"], state_c, args.steps)
         t_bare = _bare_c(
             envs["mujoco"], np.asarray(state_c.pipeline_state.qpos, np.float64), args.steps
         )
+        bare_s[n] = t_bare
         if n < args.skip_mjx_at:
             _, c_envx, t_envx = _env_step_time(envs["mjx"], n, max(args.steps // 4, 2))
         else:
@@ -157,9 +164,30 @@ def main():
             f"training iteration (rollout + PPO update), {args.config} network, "
             f"{args.train_envs} envs x {cfg.ppo.num_steps} steps:"
         )
-        for name in ("mujoco", "mjx"):
+        full = {}
+        for name in args.train_backends:
             c, sps = _train_iteration(cfg, name, args.train_envs, args.train_iterations)
+            full[name] = sps
             print(f"  {name:>6}: {sps:>8,.0f} env-steps/s (compile {c:.1f} s)", flush=True)
+        if "mujoco" in full:
+            # The update's share, and the most any env could give: bare C physics + the update.
+            steps = args.train_envs * cfg.ppo.num_steps
+            _, sps1 = _train_iteration(cfg, "mujoco", args.train_envs, args.train_iterations, 1)
+            k = cfg.ppo.num_epochs * cfg.ppo.num_minibatches
+            update_s = (steps / full["mujoco"] - steps / sps1) * k / (k - 1)
+            print(
+                f"  mujoco, 1 epoch x 1 minibatch: {sps1:,.0f} env-steps/s -> the update "
+                f"({k} grad steps) takes ~{update_s:.2f} s of the "
+                f"{steps / full['mujoco']:.2f} s iteration"
+            )
+            if args.train_envs in bare_s:
+                physics_s = bare_s[args.train_envs] * cfg.ppo.num_steps
+                print(
+                    f"  bound: bare C physics of the rollout {physics_s:.2f} s + the update "
+                    f"{update_s:.2f} s -> at most {steps / (physics_s + update_s):,.0f} "
+                    f"env-steps/s with everything else free",
+                    flush=True,
+                )
 
 
 if __name__ == "__main__":

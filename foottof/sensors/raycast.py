@@ -256,9 +256,9 @@ def _finish(h_flat, hf: Heightfield, o, d, t_tri, g_best, max_range_m: float, wi
 
 # Rounds of the adaptive walk: (strips, share). Every ray walks the first round's strips; each
 # later round gathers the rays still unfinished, ``share`` of all rays at a time, and walks its
-# strips further (``None``: all that are left). Sized from the stage-1 policy's ToF rays (bench/NOTES.md
-# item 7): unfinished after 2 / 4 / 8 / 14 of the 27 strips: 40 / 20 / 9 / 4 % of the rays; shares
-# with a margin over those were faster (an overflowing round costs a second pass).
+# strips further (``None``: all that are left). Sized from the stage-1 policy's ToF rays
+# (bench/NOTES.md item 7): unfinished after 2 / 4 / 8 / 14 of the 27 strips: 40 / 20 / 9 / 4 % of
+# the rays; shares with a margin over those were faster (an overflowing round takes a 2nd pass).
 ROUNDS = ((2, 1.0), (2, 0.42), (4, 0.29), (6, 0.15), (None, 0.06))
 
 
@@ -388,10 +388,10 @@ def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) 
 
     jit- and vmap-able; ``max_range`` is static (it sets the number of strips,
     ``num_strips(hfield, max_range)``). Each ray walks the strips in order and stops at its first
-    hit: every ray walks the first of the ``ROUNDS``, the unfinished ones walk on in gathered
-    chunks, round by round, and
-    under ``vmap`` the rays of all batch elements are walked together (``custom_vmap``), so the
-    cost follows where the rays actually hit rather than ``max_range``.
+    hit: every ray walks the strips of the first of the ``ROUNDS``, the unfinished ones walk on
+    in gathered chunks, round by round, and under ``vmap`` the rays of all batch elements are
+    walked together (``custom_vmap``), so the cost follows where the rays actually hit rather
+    than ``max_range``.
 
     Args:
       hfield: terrain; heights outside the representable range are clipped like MuJoCo does.

@@ -83,16 +83,16 @@ def _physics_step_time(env, state, steps):
     )
 
 
-def _train_iteration(cfg, physics_name, num_envs, iterations, sgd_steps=None):
-    """(compile s, env-steps/s) of one training iteration; ``sgd_steps=1``: 1 epoch x 1
-    minibatch instead of the config's update (what the update costs is the difference)."""
+def _train_iteration(cfg, physics_name, num_envs, iterations, one_epoch=False):
+    """(compile s, env-steps/s) of one training iteration; ``one_epoch``: 1 epoch of the same
+    minibatches instead of the config's ``ppo.num_epochs`` (the difference is the other epochs)."""
     from foottof.ppo import train as train_lib
 
     cfg = cfg.copy_and_resolve_references()
     cfg.env.physics = physics_name
     cfg.ppo.num_envs = num_envs
-    if sgd_steps == 1:
-        cfg.ppo.num_epochs, cfg.ppo.num_minibatches = 1, 1
+    if one_epoch:
+        cfg.ppo.num_epochs = 1
     env = make_training_env(cfg)
     trainer = train_lib.make_train(env, cfg)
     state = jax.block_until_ready(trainer.init(jax.random.PRNGKey(0)))
@@ -169,16 +169,18 @@ def main():
             c, sps = _train_iteration(cfg, name, args.train_envs, args.train_iterations)
             full[name] = sps
             print(f"  {name:>6}: {sps:>8,.0f} env-steps/s (compile {c:.1f} s)", flush=True)
-        if "mujoco" in full:
+        if "mujoco" in full and cfg.ppo.num_epochs > 1:
             # The update's share, and the most any env could give: bare C physics + the update.
             steps = args.train_envs * cfg.ppo.num_steps
-            _, sps1 = _train_iteration(cfg, "mujoco", args.train_envs, args.train_iterations, 1)
-            k = cfg.ppo.num_epochs * cfg.ppo.num_minibatches
-            update_s = (steps / full["mujoco"] - steps / sps1) * k / (k - 1)
+            _, sps1 = _train_iteration(
+                cfg, "mujoco", args.train_envs, args.train_iterations, one_epoch=True
+            )
+            e, m = cfg.ppo.num_epochs, cfg.ppo.num_minibatches
+            update_s = (steps / full["mujoco"] - steps / sps1) * e / (e - 1)
             print(
-                f"  mujoco, 1 epoch x 1 minibatch: {sps1:,.0f} env-steps/s -> the update "
-                f"({k} grad steps) takes ~{update_s:.2f} s of the "
-                f"{steps / full['mujoco']:.2f} s iteration"
+                f"  mujoco, 1 epoch: {sps1:,.0f} env-steps/s -> the update ({e} epochs x {m} "
+                f"minibatches) takes ~{update_s:.2f} s of the {steps / full['mujoco']:.2f} s "
+                f"iteration"
             )
             if args.train_envs in bare_s:
                 physics_s = bare_s[args.train_envs] * cfg.ppo.num_steps

@@ -172,9 +172,8 @@ def test_ray_matches_mj_ray(oracle):
     "first, max_range",
     [
         (0, 0.3),
-        pytest.param(
-            None, 1.0, marks=pytest.mark.slow
-        ),  # the shipped ROUNDS: also in the mj_ray test
+        # None: the shipped ROUNDS (test_ray_matches_mj_ray runs them against mj_ray too)
+        pytest.param(None, 1.0, marks=pytest.mark.slow),
         pytest.param(4, R_ORACLE, marks=pytest.mark.slow),
     ],
 )

@@ -45,8 +45,7 @@ def record_rays(setup, num_envs: int, steps: int, key):
 
     def rays(d):
         fk = kinematics.world_foot_kinematics(d.qpos, sensing.shank_scale)
-        pos, rot = tof.sensor_frames(spec, fk.tof_pos[feet], fk.tof_rot[feet])
-        dirs = jp.einsum("fij,rj->fri", rot, jp.asarray(spec.ray_directions(), rot.dtype))
+        pos, dirs = tof.sensor_rays(spec, fk.tof_pos[feet], fk.tof_rot[feet])
         return jp.broadcast_to(pos[:, None, :], dirs.shape).reshape(-1, 3), dirs.reshape(-1, 3)
 
     reset, step = jax.vmap(env.reset), jax.vmap(env.step)

@@ -274,6 +274,13 @@ def zone_minimum(spec: ToFSpec, hit_dist, hit_valid, dirs_world):
     return best, nearest
 
 
+def sensor_rays(spec: ToFSpec, site_pos, site_rot):
+    """(F, 3) world sensor origins [m] and (F, R, 3) unit world ray directions of every sensor
+    (site pose as in :func:`cast_rays`)."""
+    pos, rot = sensor_frames(spec, site_pos, site_rot)
+    return pos, jp.einsum("fij,rj->fri", rot, jp.asarray(spec.ray_directions(), rot.dtype))
+
+
 def cast_rays(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot):
     """Casts every sensor's rays against the heightfield up to ``max_range_m``.
 
@@ -289,8 +296,7 @@ def cast_rays(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot):
       origins (F, 3) world sensor origins [m], dirs (F, R, 3) unit world ray directions,
       t (F, R) hit distance [m] (-1 = no hit within range), normals (F, R, 3) at the hits.
     """
-    pos, rot = sensor_frames(spec, site_pos, site_rot)
-    dirs = jp.einsum("fij,rj->fri", rot, jp.asarray(spec.ray_directions(), rot.dtype))  # (F,R,3)
+    pos, dirs = sensor_rays(spec, site_pos, site_rot)
     f, r = spec.num_sensors, spec.num_rays
     origins = jp.broadcast_to(pos[:, None, :], (f, r, 3)).reshape(-1, 3)
     t, n = ray_heightfield_normal(hfield, origins, dirs.reshape(-1, 3), spec.max_range_m)

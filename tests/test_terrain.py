@@ -1,5 +1,6 @@
 """Tests of foottof.terrain: tiles (geometry measured from the arrays), terrain map, curriculum."""
 
+import dataclasses
 import time
 
 import jax
@@ -30,6 +31,7 @@ from foottof.terrain import (
     update_levels,
 )
 from foottof.terrain.heightfield import hfield_xml, write_to_mjmodel, write_to_mjx
+from foottof.terrain.terrain_map import tile_generator
 
 SPEC = TileSpec()
 CELL = SPEC.cell_m
@@ -394,6 +396,13 @@ SMALL_MAP = TerrainMapSpec(
     col_difficulty=((0.0, 1.0), (0.0, 1.0), (0.2, 0.6), (0.5, 0.5)),
     border_m=0.4,
 )
+# The same tile types and geometry, another size and difficulty table.
+_BIGGER_MAP = dataclasses.replace(
+    SMALL_MAP,
+    num_levels=5,
+    col_types=(0, 3, 3, 5, 5),
+    col_difficulty=((0.1, 0.9), (0.0, 1.0), (0.3, 0.4), (0.2, 0.6), (0.0, 0.0)),
+)
 
 
 @pytest.fixture(scope="module")
@@ -449,11 +458,20 @@ def test_spawn_and_goal_on_flat_regions(small_map):
     np.testing.assert_allclose(goal[..., 1], sp[..., SPAWN_Y])
 
 
+def _compiles_of_tile_generators() -> int:
+    return sum(tile_generator(t, SMALL_TILE)._cache_size() for t in set(SMALL_MAP.col_types))
+
+
 def test_map_regenerates_without_recompiling(small_map):
-    before = build_terrain_map._cache_size()
+    """A new key, or another map of the same tile types and geometry (more levels and columns,
+    another difficulty table) compiles nothing: each type's tile generator is compiled once."""
+    before = _compiles_of_tile_generators()
+    assert before >= len(set(SMALL_MAP.col_types))  # at least one per type, from the fixture
     other = build_terrain_map(jax.random.key(6), SMALL_MAP)
     again = build_terrain_map(jax.random.key(5), SMALL_MAP)
-    assert build_terrain_map._cache_size() == before
+    bigger = build_terrain_map(jax.random.key(8), _BIGGER_MAP)
+    assert _compiles_of_tile_generators() == before
+    assert bigger.hfield.heights.shape[0] > small_map.hfield.heights.shape[0]
     assert not np.array_equal(
         np.asarray(other.hfield.heights), np.asarray(small_map.hfield.heights)
     )

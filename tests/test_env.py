@@ -39,8 +39,9 @@ def reset_perturbed(env):
     return jax.jit(jax.vmap(env.reset_perturbed, in_axes=(0, None, None)))
 
 
-def _on_columns(env, state):
-    """Put env i on column i (level 0) by re-resetting with explicit tiles."""
+@pytest.fixture(scope="module")
+def on_columns(env):
+    """A batch with env i on column i (level 0): explicit tiles; one compile for the module."""
     keys = jax.random.split(jax.random.PRNGKey(7), NUM_ENVS)
     cols = jp.arange(NUM_ENVS) % env.tmap.num_cols
     return jax.jit(jax.vmap(env._reset_episode))(keys, jp.zeros(NUM_ENVS, jp.int32), cols)
@@ -57,9 +58,9 @@ def _with(state, env_index, **task_updates):
     return state.replace(info=info)
 
 
-def test_shapes_and_no_nan_on_every_terrain(env, fns):
-    reset, step = fns
-    state = _on_columns(env, reset(jax.random.split(jax.random.PRNGKey(0), NUM_ENVS)))
+def test_shapes_and_no_nan_on_every_terrain(env, fns, on_columns):
+    _, step = fns
+    state = on_columns
     sizes = env.observation_size
     assert state.obs["state"].shape == (NUM_ENVS, sizes["state"])
     assert state.obs["privileged_state"].shape == (NUM_ENVS, sizes["privileged_state"])
@@ -384,11 +385,10 @@ def test_knee_contact_is_a_penalty_unless_configured(env, terminates):
         assert bool(failed) == (touching and terminates)
 
 
-def test_spawn_pays_no_penalty_events(env, fns):
+def test_spawn_pays_no_penalty_events(fns, on_columns):
     """Standing still from the spawn: no jump, collision, termination or slip events."""
-    reset, step = fns
-    state = reset(jax.random.split(jax.random.PRNGKey(9), NUM_ENVS))
-    state = _on_columns(env, state)
+    _, step = fns
+    state = on_columns
     for _ in range(25):
         state = step(state, jp.zeros((NUM_ENVS, 12)))
         for term in ("jump", "collision", "termination"):

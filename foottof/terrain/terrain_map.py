@@ -276,8 +276,8 @@ def build_terrain_map(key: jax.Array, spec: TerrainMapSpec) -> TerrainMap:
     """Generates every tile of ``spec`` from ``key`` and assembles the map.
 
     Each tile comes from its type's jitted generator (:func:`tile_generator`), compiled once per
-    process and type, so a new key, map size or curriculum table compiles nothing new (one jit of
-    the whole map cost ~20 s of compile per distinct map on a 2-core CPU).
+    process and type, so a new key, map size or curriculum table compiles nothing new
+    (bench/NOTES.md item 9).
 
     Args:
       key: PRNG key; tile (l, c) uses ``jax.random.split(key, (L, C))[l, c]``.

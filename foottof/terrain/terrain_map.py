@@ -277,7 +277,8 @@ def build_terrain_map(key: jax.Array, spec: TerrainMapSpec) -> TerrainMap:
 
     Each tile comes from its type's jitted generator (:func:`tile_generator`), compiled once per
     process and type, so a new key, map size or curriculum table compiles nothing new
-    (bench/NOTES.md item 9).
+    (bench/NOTES.md item 9). Call it eagerly: under an outer ``jax.jit`` XLA inlines one call per
+    tile (the 200-tile stage-1 map then compiled for ~6 min).
 
     Args:
       key: PRNG key; tile (l, c) uses ``jax.random.split(key, (L, C))[l, c]``.

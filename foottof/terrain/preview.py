@@ -9,7 +9,8 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from foottof.terrain.tiles import TERRAIN_TYPES, TileSpec, generate_tile
+from foottof.terrain.terrain_map import tile_generator
+from foottof.terrain.tiles import TERRAIN_TYPES, TileSpec
 
 
 def render_grid(
@@ -47,8 +48,8 @@ def render_grid(
     fig, axes = plt.subplots(nrow, ncol, figsize=(3.6 * ncol, 2.55 * nrow), squeeze=False)
     lo, hi = spec.pit_z_m, 0.7
     for r, name in enumerate(TERRAIN_TYPES):
-        gen = jax.jit(jax.vmap(lambda k, dd, name=name: generate_tile(name, k, dd, spec)))
-        tiles = np.asarray(gen(keys, d))
+        gen = tile_generator(r, spec)  # the terrain map's per-type generator
+        tiles = [np.asarray(gen(keys[c], d[c])) for c in range(ncol)]
         for c in range(ncol):
             z = tiles[c]
             rgb = ls.shade(

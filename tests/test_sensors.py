@@ -201,6 +201,20 @@ def test_adaptive_walk_equals_walking_every_strip(oracle, monkeypatch, first, ma
         np.testing.assert_array_equal(got[0], full[0])
         np.testing.assert_array_equal(got[1], full[1])
     assert (full[0] >= 0).mean() > 0.2 and (full[0] < 0).sum() > 100
+    # A terrain per "env" (as each env's height scan): rays read their own terrain.
+    shift = np.arange(40) % 7 * 3  # terrain k = the oracle's heights rolled by a few cells
+    terrains = jp.stack([jp.roll(hf.heights, int(k), axis=int(k) % 2) for k in shift])
+
+    def per_env(adaptive):
+        def cast(h, o, d):
+            return raycast._cast(hf.replace(heights=h), o, d, max_range, True, adaptive)
+
+        return jax.jit(jax.vmap(cast))(terrains, o.reshape(40, -1, 3), d.reshape(40, -1, 3))
+
+    own = per_env(False)
+    for a, b in zip(per_env(True), own, strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(own[0].reshape(-1), full[0])  # the terrains differ
 
 
 def test_ray_max_range_and_miss(oracle):

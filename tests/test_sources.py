@@ -128,6 +128,17 @@ def test_height_scan_matches_mj_ray(stones_hf):
         )
         errs.append(abs((5.0 - dist) - (scan[i, j] + base[2])))
     assert max(errs) < 1e-4
+    # The scan reads the 2 x 2 vertices with one gather; the four-gather lookup agrees exactly,
+    # also on vertices and at and beyond the edges (clamped), of this and of a random terrain.
+    rng = np.random.default_rng(0)
+    rough = Heightfield(heights=jp.asarray(rng.uniform(0, 1, (37, 153)), jp.float32), cell_m=0.04)
+    for hf in (stones_hf, rough):
+        lo = np.array([hf.x0_m, hf.y0_m])
+        hi = lo + 2 * np.array(hf.half_extents_m)
+        pts = [rng.uniform(lo - 0.2, hi + 0.2, (4000, 2)), np.stack([wx, wy], -1).reshape(-1, 2)]
+        pts += [lo + hf.cell_m * rng.integers(0, [hf.ncol, hf.nrow], (500, 2)), [lo, hi, hi + 1]]
+        pts = jp.asarray(np.concatenate(pts), jp.float32)
+        np.testing.assert_array_equal(hf.height_at(pts, True), hf.height_at(pts))
 
 
 def test_scan_heightfield_bad_shape_raises():
@@ -281,6 +292,30 @@ def test_straight_walk_by_whole_cells_remembers_exactly(straight_walk):
     err, count = em.memory_error(state, ideal)
     assert int(count) > 500
     assert float(err) < 1e-5
+
+
+def test_map_forgets_cells_that_leave_its_window(stones_hf):
+    """The stored map is a ring buffer: an odometry jump of 5 m (100 cells) and back relabels
+    its slots; the cells under the belly that left the window come back unknown (not with the
+    heights of the cells their slots held meanwhile), and the map's masks and scan agree."""
+    pos, quat = jp.array([2.0, 2.0, 0.6]), jp.array([1.0, 0.0, 0.0, 0.0])
+    upd = jax.jit(em.aggre_update, static_argnames=("dt", "with_flags"))
+    state = em.aggre_init(stones_hf, pos, quat)
+    assert bool(state.scan_known[50, 50]) and bool(state.known.all())
+    jump = jp.array([5.0 / DT, 0.0, 0.0])  # odometry: 5 m in one step (the true base stays)
+    away = upd(state, stones_hf, pos, quat, jump, jp.zeros(3), dt=DT)
+    np.testing.assert_array_equal(away.center_idx, [100, 0])
+    back = upd(away, stones_hf, pos, quat, -jump, jp.zeros(3), dt=DT)
+    np.testing.assert_array_equal(back.center_idx, [0, 0])
+    assert not bool(back.scan_known[50, 50])  # the belly zone: not in view, forgotten
+    assert float(back.scan[50, 50]) == em.UNKNOWN_HEIGHT_M
+    assert 0.3 < float(back.known.mean()) < 0.95  # what the cameras saw meanwhile
+    # Without the masks (as the env updates it): the same scan to float rounding.
+    lean = upd(away, stones_hf, pos, quat, -jump, jp.zeros(3), dt=DT, with_flags=False)
+    assert lean.scan_known is None and lean.scan_in_view is None
+    np.testing.assert_allclose(lean.scan, back.scan, atol=1e-4, rtol=0)
+    with pytest.raises(ValueError, match="with_flags=True"):
+        em.memory_error(lean, lean.scan)
 
 
 def test_update_bad_dt_and_level_raise(stones_hf):

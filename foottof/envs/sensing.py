@@ -53,10 +53,19 @@ class Sense:
 
 @struct.dataclass
 class SensingState:
-    """Per-env sensing state: the ToF timing/degradation pipeline and, for mock_aggre, the map."""
+    """Per-env sensing state: the ToF timing/degradation pipeline and, for mock_aggre, the map
+    (its ``scan`` None: rebuilt by every update, see _without_scan)."""
 
     tof: timing.ToFState
     emap: em.ElevationMapState | None = None
+
+
+def _without_scan(emap: em.ElevationMapState | None) -> em.ElevationMapState | None:
+    """The map as the env carries it: without its robot-centric scan, which every update
+    rebuilds and only this step's readings use. Carried, the scan would be a second consumer of
+    its loop, and XLA's CPU backend would then materialize that loop's terrain gathers (~2x the
+    cost of the mock_aggre step, bench/NOTES.md item 10)."""
+    return None if emap is None else emap.replace(scan=None)
 
 
 class Sensing:
@@ -128,11 +137,11 @@ class Sensing:
         """Sensing state of a fresh episode (draws degradation levels, delay, frame phases)."""
         emap = None
         if self.source == "mock_aggre":
-            emap = em.aggre_init(self.hfield, d.qpos[0:3], d.qpos[3:7])
+            emap = em.aggre_init(self.hfield, d.qpos[0:3], d.qpos[3:7], with_flags=False)
         true = self.true_reading(d)
         reading = self._source_reading(d, meas, emap, true)
         tstate, obs = timing.reset(self.timing, self.bounds, self.model, key, reading)
-        return SensingState(tof=tstate, emap=emap), self._sense(obs, true)
+        return SensingState(tof=tstate, emap=_without_scan(emap)), self._sense(obs, true)
 
     def step(
         self, state: SensingState, key, d, meas: Measurements, done
@@ -154,12 +163,13 @@ class Sensing:
                 meas.ang_vel,
                 self.dt,
                 reset=done,
+                with_flags=False,  # the masks are diagnostics; without them: one fused loop
             )
         true = self.true_reading(d)
         reading = self._source_reading(d, meas, emap, true)
         t_step, o_step = timing.step(self.timing, self.model, state.tof, reading, key_step)
         t_reset, o_reset = timing.reset(self.timing, self.bounds, self.model, key_reset, reading)
         sel = lambda a, b: jax.tree.map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
-        return SensingState(tof=sel(t_reset, t_step), emap=emap), self._sense(
+        return SensingState(tof=sel(t_reset, t_step), emap=_without_scan(emap)), self._sense(
             sel(o_reset, o_step), true
         )

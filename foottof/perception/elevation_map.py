@@ -23,10 +23,13 @@ SCAN_Z_RANGE_M = 6.0  # representable relative heights [-4, +2] m (Heightfield z
 UNKNOWN_HEIGHT_M = SCAN_Z_FLOOR_M
 
 # Stored map: a grid fixed in the estimated odometry frame (axes of the initial base yaw frame),
-# scrolled by whole cells to stay centred on the estimated base. 145 vertices (+-3.6 m) cover the
-# 5 m x 5 m scan at any yaw (2.5 * sqrt(2) = 3.54 m) plus one cell of scroll slack.
+# moved by whole cells to stay centred on the estimated base. 145 vertices (+-3.6 m) cover the
+# 5 m x 5 m scan at any yaw (2.5 * sqrt(2) = 3.54 m) plus one cell of slack. It is a ring buffer,
+# as grid_map's (ANYbotics' elevation mapping): odometry cell (kx, ky) lives in slot
+# [ky mod 145, kx mod 145], so moving the map relabels slots instead of copying the grid, and
+# unknown vertices hold NaN (grid_map's convention).
 MAP_N = 145  # stored vertices per side
-_MAP_C = (MAP_N - 1) // 2  # index of the centre vertex
+_MAP_C = (MAP_N - 1) // 2  # window offset of the centre vertex
 
 
 def scan_heightfield(heights: jax.Array) -> Heightfield:
@@ -65,12 +68,14 @@ def tilt_rotation(base_quat: jax.Array) -> jax.Array:
     return jp.swapaxes(_rot_z(yaw_from_quat(base_quat)), -1, -2) @ r
 
 
-def _terrain_rel(hfield: Heightfield, base_pos: jax.Array, base_yaw: jax.Array, r_xy: jax.Array):
+def _terrain_rel(
+    hfield: Heightfield, base_pos: jax.Array, base_yaw: jax.Array, r_xy: jax.Array, patch=False
+):
     """Terrain height minus base z at yaw-frame points (..., 2) [m]."""
     c, s = jp.cos(base_yaw), jp.sin(base_yaw)
     wx = base_pos[0] + c * r_xy[..., 0] - s * r_xy[..., 1]
     wy = base_pos[1] + s * r_xy[..., 0] + c * r_xy[..., 1]
-    return hfield.height_at(jp.stack([wx, wy], axis=-1)) - base_pos[2]
+    return hfield.height_at(jp.stack([wx, wy], axis=-1), patch) - base_pos[2]
 
 
 def height_scan(hfield: Heightfield, base_pos: jax.Array, base_yaw: jax.Array) -> jax.Array:
@@ -87,7 +92,9 @@ def height_scan(hfield: Heightfield, base_pos: jax.Array, base_yaw: jax.Array) -
     Returns:
       (101, 101) terrain height minus base z [m] at the scan vertices (see SCAN_* constants).
     """
-    return _terrain_rel(hfield, base_pos, base_yaw, scan_xy())
+    # One gather per vertex: the scan is read twice by the ray caster, so XLA's CPU backend
+    # materializes this lookup (see _compose_scan).
+    return _terrain_rel(hfield, base_pos, base_yaw, scan_xy(), patch=True)
 
 
 @struct.dataclass
@@ -95,39 +102,58 @@ class ElevationMapState:
     """Aggregated elevation map of one env (mock_aggre).
 
     Memory lives in a grid fixed in the *estimated* odometry frame (the initial base yaw frame,
-    propagated by dead reckoning) and scrolled by whole cells, so cells outside the cameras' view
+    propagated by dead reckoning) and moved by whole cells, so cells outside the cameras' view
     are never re-interpolated step after step (no numerical blur); they move into the current base
     frame only through the estimated pose. The robot-centric ``scan`` is rebuilt every update.
 
     Attributes:
-      heights: (145, 145) stored terrain z in the odometry frame [m]; vertex (i, j) at odometry
-        x = (center_idx[0] + j - 72) * 0.05, y = (center_idx[1] + i - 72) * 0.05.
-      known: (145, 145) bool, the stored vertex has been seen.
-      center_idx: (2,) int32 odometry (x, y) cell index of the stored grid's centre vertex.
+      heights: (145, 145) stored terrain z in the odometry frame [m], NaN where never seen (or
+        moved out of the window); a ring buffer: the vertex of odometry cell (kx, ky), at
+        x = 0.05 kx, y = 0.05 ky, is slot [ky mod 145, kx mod 145], for the cells within 72 of
+        ``center_idx`` (:func:`window_cells`).
+      center_idx: (2,) int32 odometry (x, y) cell index of the window's centre vertex.
       pose_est: (4,) estimated base x, y, z [m] and yaw [rad] in the odometry frame.
       tilt_prev: (3, 3) roll/pitch rotation of the base at the last update (IMU).
       scan: (101, 101) robot-centric heights relative to the base z [m] (scan_heightfield
         layout): fresh ground truth in view, the moved prior elsewhere, UNKNOWN_HEIGHT_M if never
         seen.
-      scan_known: (101, 101) bool, the scan vertex is in view or was seen before.
-      scan_in_view: (101, 101) bool, the scan vertex is seen by a camera at this step.
+        Every update rebuilds it (the previous one is not read), so a carrier may drop it (the
+        env carries None).
+      scan_known: (101, 101) bool, the scan vertex is in view or was seen before; None when
+        the update was asked for no flags (``with_flags=False``, as the env does).
+      scan_in_view: (101, 101) bool, the scan vertex is seen by a camera at this step (None
+        likewise).
     """
 
     heights: jax.Array
-    known: jax.Array
     center_idx: jax.Array
     pose_est: jax.Array
     tilt_prev: jax.Array
     scan: jax.Array
-    scan_known: jax.Array
-    scan_in_view: jax.Array
+    scan_known: jax.Array | None = None
+    scan_in_view: jax.Array | None = None
+
+    @property
+    def known(self) -> jax.Array:
+        """(145, 145) bool, the stored vertex has been seen (per ring-buffer slot)."""
+        return ~jp.isnan(self.heights)
+
+
+def window_cells(center_idx: jax.Array) -> tuple[jax.Array, jax.Array]:
+    """Odometry cell index held by each ring-buffer column and row: (kx (145,), ky (145,)).
+
+    The window spans cells ``center_idx - 72 .. center_idx + 72``; cell k sits in slot k mod 145.
+    """
+    lo = center_idx - _MAP_C
+    s = jp.arange(MAP_N, dtype=center_idx.dtype)
+    return lo[0] + jp.mod(s - lo[0], MAP_N), lo[1] + jp.mod(s - lo[1], MAP_N)
 
 
 def _map_xy(center_idx: jax.Array) -> jax.Array:
-    """(145, 145, 2) odometry-frame x, y of the stored vertices [m]."""
-    k = jp.arange(MAP_N) - _MAP_C
-    x = (center_idx[0] + k)[None, :] * SCAN_CELL_M
-    y = (center_idx[1] + k)[:, None] * SCAN_CELL_M
+    """(145, 145, 2) odometry-frame x, y of the stored vertices [m] (ring-buffer slots)."""
+    kx, ky = window_cells(center_idx)
+    x = kx[None, :] * SCAN_CELL_M
+    y = ky[:, None] * SCAN_CELL_M
     return jp.stack(jp.broadcast_arrays(x, y), axis=-1)
 
 
@@ -156,45 +182,77 @@ def _in_view(r_xy, h_rel, tilt, cameras, see_all: bool) -> jax.Array:
     return cam_lib.visible(p_base, cameras)
 
 
-def _camera_update(
-    state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all, reset=False
+def _update_map(
+    state: ElevationMapState,
+    new_center,
+    hfield,
+    base_pos,
+    base_quat,
+    cameras,
+    see_all,
+    reset=False,
 ):
-    """Overwrite stored vertices seen by a camera with ground truth (placed via pose_est);
-    where ``reset`` (traced bool) every vertex counts as seen (aggre_init's full prior)."""
-    r_xy = _odom_to_robot(_map_xy(state.center_idx), state.pose_est)  # where the robot thinks
+    """Move the window to ``new_center`` and overwrite the vertices a camera sees with ground
+    truth (placed via pose_est); where ``reset`` (traced bool) every vertex counts as seen.
+
+    Moving keeps a slot's height where it holds the same odometry cell before and after (the
+    ring buffer: no copy), and forgets it (NaN) where the slot now holds a newly entered cell.
+    The map has a single output on purpose: XLA's CPU backend fuses the terrain lookups (gathers)
+    into the one loop that consumes them, where a second output (a separate known mask) made it
+    materialize each gather, ~4x slower (bench/NOTES.md item 10).
+    """
+    kx_old, ky_old = window_cells(state.center_idx)
+    kx, ky = window_cells(new_center)
+    kept = (ky == ky_old)[:, None] & (kx == kx_old)[None, :]
+    r_xy = _odom_to_robot(_map_xy(new_center), state.pose_est)  # where the robot thinks
     h_rel = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy)  # what the camera sees
     seen = _in_view(r_xy, h_rel, tilt_rotation(base_quat), cameras, see_all) | reset
-    heights = jp.where(seen, h_rel + state.pose_est[2], state.heights)
-    return state.replace(heights=heights, known=state.known | seen)
+    stored = jp.where(kept, state.heights, jp.nan)
+    heights = jp.where(seen, h_rel + state.pose_est[2], stored)
+    return state.replace(heights=heights, center_idx=new_center)
 
 
-def _sample_map(state: ElevationMapState, p_xy: jax.Array):
-    """Bilinear sample of the stored map at odometry (..., 2) points -> (z, known)."""
-    u = p_xy[..., 0] / SCAN_CELL_M - state.center_idx[0] + _MAP_C  # fractional column
-    v = p_xy[..., 1] / SCAN_CELL_M - state.center_idx[1] + _MAP_C  # fractional row
+def _sample_map(state: ElevationMapState, p_xy: jax.Array) -> jax.Array:
+    """Bilinear sample of the stored map at odometry (..., 2) points -> z, NaN unless the point
+    lies in the window and all four vertices around it are known."""
+    u = p_xy[..., 0] / SCAN_CELL_M - state.center_idx[0] + _MAP_C  # fractional window column
+    v = p_xy[..., 1] / SCAN_CELL_M - state.center_idx[1] + _MAP_C  # fractional window row
     inside = (u >= 0.0) & (u <= MAP_N - 1) & (v >= 0.0) & (v <= MAP_N - 1)
     j = jp.clip(jp.floor(u).astype(jp.int32), 0, MAP_N - 2)
     i = jp.clip(jp.floor(v).astype(jp.int32), 0, MAP_N - 2)
     fu, fv = jp.clip(u - j, 0.0, 1.0), jp.clip(v - i, 0.0, 1.0)
-    h, k = state.heights, state.known
+    lo = state.center_idx - _MAP_C
+    j0, j1 = jp.mod(lo[0] + j, MAP_N), jp.mod(lo[0] + j + 1, MAP_N)  # ring-buffer slots
+    i0, i1 = jp.mod(lo[1] + i, MAP_N), jp.mod(lo[1] + i + 1, MAP_N)
+    h = state.heights
     z = (
-        h[i, j] * (1 - fu) * (1 - fv)
-        + h[i, j + 1] * fu * (1 - fv)
-        + h[i + 1, j] * (1 - fu) * fv
-        + h[i + 1, j + 1] * fu * fv
-    )
-    known = inside & k[i, j] & k[i, j + 1] & k[i + 1, j] & k[i + 1, j + 1]
-    return z, known
+        h[i0, j0] * (1 - fu) * (1 - fv)
+        + h[i0, j1] * fu * (1 - fv)
+        + h[i1, j0] * (1 - fu) * fv
+        + h[i1, j1] * fu * fv
+    )  # NaN if a vertex is unknown (even at weight 0)
+    return jp.where(inside, z, jp.nan)
 
 
-def _compose_scan(state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all):
-    """Robot-centric scan: ground truth where a camera sees it, else the moved prior."""
+def _compose_scan(
+    state: ElevationMapState, hfield, base_pos, base_quat, cameras, see_all, with_flags=True
+):
+    """Robot-centric scan: ground truth where a camera sees it, else the moved prior.
+
+    ``with_flags`` (static): also the scan_known / scan_in_view masks. Without them the scan is
+    the only output (one fused loop on CPU, see _update_map); the env needs only the scan.
+    """
     r_xy = scan_xy()
-    gt = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy)
+    # One gather per vertex: the ray caster reads the scan twice (its strip walk and its wall
+    # lookups), so XLA's CPU backend materializes this lookup; one 2 x 2 gather costs less
+    # there than four (bench/NOTES.md item 10).
+    gt = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy, patch=True)
     seen = _in_view(r_xy, gt, tilt_rotation(base_quat), cameras, see_all)
-    prior, known = _sample_map(state, _robot_to_odom(r_xy, state.pose_est))
-    prior_rel = prior - state.pose_est[2]
-    scan = jp.where(seen, gt, jp.where(known, prior_rel, UNKNOWN_HEIGHT_M))
+    prior = _sample_map(state, _robot_to_odom(r_xy, state.pose_est))
+    known = ~jp.isnan(prior)
+    scan = jp.where(seen, gt, jp.where(known, prior - state.pose_est[2], UNKNOWN_HEIGHT_M))
+    if not with_flags:
+        return state.replace(scan=scan, scan_known=None, scan_in_view=None)
     return state.replace(scan=scan, scan_known=seen | known, scan_in_view=seen)
 
 
@@ -205,6 +263,7 @@ def aggre_init(
     cameras: tuple[cam_lib.Camera, ...] = cam_lib.CAMERAS,
     see_all: bool = False,
     full_prior: bool = True,
+    with_flags: bool = True,
 ) -> ElevationMapState:
     """Start an elevation map at the true base pose (the odometry frame's origin).
 
@@ -217,39 +276,24 @@ def aggre_init(
       full_prior: static; True starts from a complete ideal survey of the +-3.6 m surroundings
         (as if the robot had mapped them while standing), False from the cameras' first view only
         (the belly and feet zones start unknown).
+      with_flags: static; False leaves scan_known / scan_in_view None (cheaper, see
+        aggre_update).
 
     Returns:
       ElevationMapState with pose_est = 0.
     """
     dtype = jp.asarray(base_pos).dtype
+    centre = jp.zeros(2, jp.int32)
     state = ElevationMapState(
-        heights=jp.zeros((MAP_N, MAP_N), dtype),
-        known=jp.zeros((MAP_N, MAP_N), bool),
-        center_idx=jp.zeros(2, jp.int32),
+        heights=jp.full((MAP_N, MAP_N), jp.nan, dtype),
+        center_idx=centre,
         pose_est=jp.zeros(4, dtype),
         tilt_prev=tilt_rotation(jp.asarray(base_quat, dtype)),
         scan=jp.zeros((SCAN_N, SCAN_N), dtype),
-        scan_known=jp.zeros((SCAN_N, SCAN_N), bool),
-        scan_in_view=jp.zeros((SCAN_N, SCAN_N), bool),
     )
-    state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all or full_prior)
-    return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)
-
-
-def _scroll(state: ElevationMapState) -> ElevationMapState:
-    """Re-centre the stored grid on the estimated base by whole cells (exact, no resampling)."""
-    new_center = jp.round(state.pose_est[:2] / SCAN_CELL_M).astype(jp.int32)
-    shift = new_center - state.center_idx  # (dx, dy) cells
-    k = jp.arange(MAP_N)
-    src_i = k[:, None] + shift[1]
-    src_j = k[None, :] + shift[0]
-    inside = (src_i >= 0) & (src_i < MAP_N) & (src_j >= 0) & (src_j < MAP_N)
-    ci, cj = jp.clip(src_i, 0, MAP_N - 1), jp.clip(src_j, 0, MAP_N - 1)
-    return state.replace(
-        heights=jp.where(inside, state.heights[ci, cj], 0.0),
-        known=inside & state.known[ci, cj],
-        center_idx=new_center,
-    )
+    prior = see_all or full_prior
+    state = _update_map(state, centre, hfield, base_pos, base_quat, cameras, prior)
+    return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all, with_flags)
 
 
 def _so3_exp(rotvec: jax.Array) -> jax.Array:
@@ -308,6 +352,7 @@ def aggre_update(
     cameras: tuple[cam_lib.Camera, ...] = cam_lib.CAMERAS,
     see_all: bool = False,
     reset=False,
+    with_flags: bool = True,
 ) -> ElevationMapState:
     """One elevation-map update: move the prior by odometry, then overwrite what the cameras see.
 
@@ -329,6 +374,9 @@ def aggre_update(
       cameras: static camera tuple.
       see_all: static; True makes every cell visible.
       reset: () bool (traced), restart the map at the current pose (see above).
+      with_flags: static; False leaves the diagnostic masks scan_known / scan_in_view None. The
+        env passes False: the masks would be second outputs of the scan's loop, which makes
+        XLA's CPU backend materialize its terrain gathers (bench/NOTES.md item 10).
 
     Returns:
       The updated ElevationMapState.
@@ -340,9 +388,9 @@ def aggre_update(
     )
     pose_est = jp.where(reset, jp.zeros_like(pose_est), pose_est)  # reset: odometry origin
     state = state.replace(pose_est=pose_est, tilt_prev=tilt_rotation(base_quat))
-    state = _scroll(state)  # reset: back to centre index 0
-    state = _camera_update(state, hfield, base_pos, base_quat, cameras, see_all, reset)
-    return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all)
+    centre = jp.round(pose_est[:2] / SCAN_CELL_M).astype(jp.int32)  # reset: back to 0
+    state = _update_map(state, centre, hfield, base_pos, base_quat, cameras, see_all, reset)
+    return _compose_scan(state, hfield, base_pos, base_quat, cameras, see_all, with_flags)
 
 
 def memory_error(state: ElevationMapState, ideal_scan: jax.Array) -> tuple[jax.Array, jax.Array]:
@@ -355,6 +403,10 @@ def memory_error(state: ElevationMapState, ideal_scan: jax.Array) -> tuple[jax.A
     Returns:
       (mean absolute error [m], number of cells counted).
     """
+    if state.scan_known is None or state.scan_in_view is None:
+        raise ValueError(
+            "memory_error needs the scan masks: update the map with with_flags=True (got None)"
+        )
     mask = state.scan_known & ~state.scan_in_view
     n = jp.sum(mask)
     err = jp.sum(jp.where(mask, jp.abs(state.scan - ideal_scan), 0.0)) / jp.maximum(n, 1)

@@ -78,8 +78,10 @@ _FACE_NORMALS = (
 )
 
 
-def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: int):
+def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: int, base=0):
     """First surface-triangle hit of one ray among strips ``first .. first + count - 1``.
+
+    ``base``: index in ``h_flat`` of the ray's terrain (several terrains laid end to end).
 
     Strips are visited in the order the ray crosses them, so a hit in strip s is closer than any
     hit in a later strip (ties keep the earlier strip).
@@ -119,7 +121,7 @@ def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: 
         def vert(pi, qi):
             pc = jp.clip(pi, 0, n_p - 1)
             qc = jp.clip(qi, 0, n_q - 1)
-            return h_flat[pc * s_p + qc * s_q]
+            return h_flat[base + pc * s_p + qc * s_q]
 
         # Heights H[p, q] of the 2 x 3 vertices under the strip: rows r, r + 1, r + 2.
         hk = [vert(k, r + j) for j in range(3)]
@@ -268,7 +270,7 @@ def _surface_full(h_flat, meta: Heightfield, origins, unit, r: float, n_strips: 
     return t, g
 
 
-def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, rounds):
+def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, rounds, bases):
     """The same result as :func:`_surface_full`, with less work: every ray walks the first
     round's strips; in each later round the rays still unfinished (no hit yet, more strips within
     range and grid) are gathered ``share * N`` at a time and walk that round's strips further,
@@ -278,13 +280,14 @@ def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, roun
     strips of a 1 m ray, 87 % within 6, 95 % within 12), so this is several times fewer strip
     tests than walking all strips for every ray (bench/NOTES.md items 3 and 7). Exact: strips are
     crossed in order, so a hit found in an early strip is the first hit (see :func:`_walk`).
+    ``bases`` (N,) int: where each ray's terrain starts in ``h_flat`` (0 for a single terrain).
     """
     n = origins.shape[0]
     walk = lambda s0, count: jax.vmap(  # noqa: E731
-        lambda o, d: _walk(h_flat, meta, o, d, r, s0, count)
+        lambda o, d, b: _walk(h_flat, meta, o, d, r, s0, count, b)
     )
     first = n_strips if rounds[0][0] is None else min(int(rounds[0][0]), n_strips)
-    t, g, more = walk(0, first)(origins, unit)
+    t, g, more = walk(0, first)(origins, unit, bases)
     done_strips = first
     for i, (strips, share) in enumerate(rounds[1:], start=1):
         last = i == len(rounds) - 1 or strips is None
@@ -299,7 +302,8 @@ def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, roun
             idx = jp.nonzero(pending, size=m, fill_value=n)[0]  # n = out of bounds: dropped
             o = jp.take(origins, idx, axis=0, mode="clip")
             d = jp.take(unit, idx, axis=0, mode="clip")
-            t2, g2, more2 = walk(s0, count)(o, d)
+            b = jp.take(bases, idx, axis=0, mode="clip")
+            t2, g2, more2 = walk(s0, count)(o, d, b)
             return (
                 t.at[idx].set(t2, mode="drop"),
                 g.at[idx].set(g2, mode="drop"),
@@ -321,24 +325,32 @@ def _surface_fn(meta: Heightfield, r: float, n_strips: int):
 
     Under ``jax.vmap`` (e.g. over envs) the rays of all batch elements are walked as one set
     (``custom_vmap``), so the unfinished rays of the whole batch share the rounds of the
-    adaptive walk instead of every env paying for the slowest one.
+    adaptive walk instead of every env paying for the slowest one. A terrain per batch element
+    (e.g. each env's robot-centric height scan) is laid end to end with the others, and each
+    ray reads its own terrain through an offset.
     """
 
     @custom_vmap
-    def surface(h_flat, origins, unit):
-        return _surface_adaptive(h_flat, meta, origins, unit, r, n_strips, ROUNDS)
+    def surface(h_flat, origins, unit, bases):
+        return _surface_adaptive(h_flat, meta, origins, unit, r, n_strips, ROUNDS, bases)
 
     @surface.def_vmap
-    def _rule(axis_size, in_batched, h_flat, origins, unit):
-        h_b, o_b, u_b = in_batched
-        if h_b:  # a terrain per batch element: no rays to share, walk all strips
-            full = lambda h, o, d: _surface_full(h, meta, o, d, r, n_strips)  # noqa: E731
-            axes = (0, 0 if o_b else None, 0 if u_b else None)
-            return jax.vmap(full, in_axes=axes)(h_flat, origins, unit), (True, True)
+    def _rule(axis_size, in_batched, h_flat, origins, unit, bases):
+        h_b, o_b, u_b, b_b = in_batched
         n = origins.shape[1] if o_b else origins.shape[0]
         o = jp.broadcast_to(origins, (axis_size, n, 3)).reshape(-1, 3)
         d = jp.broadcast_to(unit, (axis_size, n, 3)).reshape(-1, 3)
-        t, g = surface(h_flat, o, d)  # itself: an outer vmap batches this call in turn
+        b = jp.broadcast_to(bases, (axis_size, n))
+        if h_b:  # terrains end to end: ray i of batch element k reads terrain k
+            size = h_flat.shape[-1]
+            if axis_size * size >= 2**31:
+                raise ValueError(
+                    f"{axis_size} terrains of {size} vertices exceed int32 indexing; "
+                    "batch fewer terrains per call"
+                )
+            b = b + (jp.arange(axis_size, dtype=b.dtype) * size)[:, None]
+            h_flat = h_flat.reshape(-1)
+        t, g = surface(h_flat, o, d, b.reshape(-1))  # itself: an outer vmap batches it in turn
         return (t.reshape(axis_size, n), g.reshape(axis_size, n, 2)), (True, True)
 
     return surface
@@ -363,7 +375,8 @@ def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool
     # Static geometry only (heights may be traced: they travel as h_flat).
     meta = hfield.replace(heights=np.broadcast_to(np.float32(0.0), hfield.heights.shape))
     if adaptive:
-        t_tri, g = _surface_fn(meta, r, n_strips)(h_flat, origins, unit)
+        bases = jp.zeros(origins.shape[0], jp.int32)
+        t_tri, g = _surface_fn(meta, r, n_strips)(h_flat, origins, unit, bases)
     else:
         t_tri, g = _surface_full(h_flat, meta, origins, unit, r, n_strips)
     t, n = jax.vmap(lambda o, d, tt, gg: _finish(h_flat, meta, o, d, tt, gg, r, with_normal))(

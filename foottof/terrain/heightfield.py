@@ -79,10 +79,14 @@ class Heightfield:
         lo, hi = self.z_floor_m, self.z_floor_m + self.z_range_m
         return self.replace(heights=jp.clip(self.heights, lo, hi))
 
-    def height_at(self, xy: jax.Array) -> jax.Array:
+    def height_at(self, xy: jax.Array, patch_gather: bool = False) -> jax.Array:
         """Height of MuJoCo's triangulated surface at world (..., 2) points [m], clamped at edges.
 
         Uses the same triangle split as MuJoCo (diagonal from vertex (i, j) to (i+1, j+1)).
+        ``patch_gather`` (static) reads the 2 x 2 vertices around each point as one gather
+        instead of four: the same values, and on XLA's CPU backend faster where the lookup is
+        materialized (the index is computed once, not per vertex), slower where it is fused into
+        its consumer (bench/NOTES.md item 10).
         """
         h = self.clipped().heights
         u = jp.clip((xy[..., 0] - self.x0_m) / self.cell_m, 0.0, self.ncol - 1.000001)
@@ -90,10 +94,27 @@ class Heightfield:
         j = jp.floor(u).astype(jp.int32)
         i = jp.floor(v).astype(jp.int32)
         fu, fv = u - j, v - i
-        h00 = h[i, j]
-        h01 = h[i, j + 1]
-        h10 = h[i + 1, j]
-        h11 = h[i + 1, j + 1]
+        if patch_gather:
+            # i, j can reach nrow - 1, ncol - 1 (the clips above round up in float32), where the
+            # four-gather lookup clamps i + 1, j + 1: an edge-replicated row and column match it.
+            patch = jax.lax.gather(
+                jp.pad(h, ((0, 1), (0, 1)), mode="edge"),
+                jp.stack([i, j], axis=-1),
+                jax.lax.GatherDimensionNumbers(
+                    offset_dims=(i.ndim, i.ndim + 1),
+                    collapsed_slice_dims=(),
+                    start_index_map=(0, 1),
+                ),
+                slice_sizes=(2, 2),
+                mode=jax.lax.GatherScatterMode.PROMISE_IN_BOUNDS,  # i <= nrow - 1 (padded)
+            )
+            h00, h01 = patch[..., 0, 0], patch[..., 0, 1]
+            h10, h11 = patch[..., 1, 0], patch[..., 1, 1]
+        else:
+            h00 = h[i, j]
+            h01 = h[i, j + 1]
+            h10 = h[i + 1, j]
+            h11 = h[i + 1, j + 1]
         # Lower triangle (fu >= fv): (0,0), (0,1), (1,1); upper: (0,0), (1,0), (1,1).
         lower = h00 + fu * (h01 - h00) + fv * (h11 - h01)
         upper = h00 + fv * (h10 - h00) + fu * (h11 - h10)

@@ -62,9 +62,8 @@ class SensingState:
 
 def _without_scan(emap: em.ElevationMapState | None) -> em.ElevationMapState | None:
     """The map as the env carries it: without its robot-centric scan, which every update
-    rebuilds and only this step's readings use. Carried, the scan would be a second consumer of
-    its loop, and XLA's CPU backend would then materialize that loop's terrain gathers (~2x the
-    cost of the mock_aggre step, bench/NOTES.md item 10)."""
+    rebuilds and only this step's readings use (41 KB less state per env; no measurable change
+    in speed, bench/NOTES.md item 10)."""
     return None if emap is None else emap.replace(scan=None)
 
 

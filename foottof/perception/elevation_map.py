@@ -149,9 +149,9 @@ def window_cells(center_idx: jax.Array) -> tuple[jax.Array, jax.Array]:
     return lo[0] + jp.mod(s - lo[0], MAP_N), lo[1] + jp.mod(s - lo[1], MAP_N)
 
 
-def _map_xy(center_idx: jax.Array) -> jax.Array:
-    """(145, 145, 2) odometry-frame x, y of the stored vertices [m] (ring-buffer slots)."""
-    kx, ky = window_cells(center_idx)
+def _map_xy(kx: jax.Array, ky: jax.Array) -> jax.Array:
+    """(145, 145, 2) odometry-frame x, y of the stored vertices [m] (ring-buffer slots) from the
+    cells of each column and row (:func:`window_cells`)."""
     x = kx[None, :] * SCAN_CELL_M
     y = ky[:, None] * SCAN_CELL_M
     return jp.stack(jp.broadcast_arrays(x, y), axis=-1)
@@ -204,7 +204,7 @@ def _update_map(
     kx_old, ky_old = window_cells(state.center_idx)
     kx, ky = window_cells(new_center)
     kept = (ky == ky_old)[:, None] & (kx == kx_old)[None, :]
-    r_xy = _odom_to_robot(_map_xy(new_center), state.pose_est)  # where the robot thinks
+    r_xy = _odom_to_robot(_map_xy(kx, ky), state.pose_est)  # where the robot thinks
     h_rel = _terrain_rel(hfield, base_pos, yaw_from_quat(base_quat), r_xy)  # what the camera sees
     seen = _in_view(r_xy, h_rel, tilt_rotation(base_quat), cameras, see_all) | reset
     stored = jp.where(kept, state.heights, jp.nan)

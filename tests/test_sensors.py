@@ -222,13 +222,17 @@ def test_ray_max_range_and_miss(oracle):
     o = jp.array([[0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.05]])
     d = jp.array([[0.0, 0.0, -1.0], [0.0, 0.0, 1.0], [0.0, 0.0, -3.0], [0.0, 0.0, 1.0]])
     z = _height_np(oracle["h"], 0.0, 0.0)
-    t_far = jax.jit(lambda o, d: ray_heightfield(hf, o, d, 3.0))(o, d)
+    cast = jax.jit(lambda o, d: ray_heightfield(hf, o, d, 3.0))
+    t_far = cast(o, d)
     assert t_far[0] == pytest.approx(1.0 - z, abs=1e-5)
     assert t_far[1] == MISS  # pointing up into the sky
     assert t_far[2] == pytest.approx(1.0 - z, abs=1e-5)  # direction normalized
     assert t_far[3] == pytest.approx(0.05, abs=1e-5)  # inside the base box: exits its top face
-    t_short = jax.jit(lambda o, d: ray_heightfield(hf, o, d, float(1.0 - z) - 1e-3))(o[:1], d[:1])
-    assert t_short[0] == MISS  # hit beyond max_range
+    # From 3 m + 1 mm above the surface the hit lies beyond max_range (3 m), from 3 m - 1 mm not.
+    o_far = o.at[0, 2].set(z + 3.001).at[2, 2].set(z + 2.999)
+    t_short = cast(o_far, d)  # same shapes: no recompilation
+    assert t_short[0] == MISS
+    assert t_short[2] == pytest.approx(2.999, abs=1e-4)
     with pytest.raises(ValueError, match="max_range"):
         ray_heightfield(hf, o, d, -1.0)
     with pytest.raises(ValueError, match="shape"):
@@ -285,10 +289,12 @@ def _brute_zone_min(spec: ToFSpec, rot: np.ndarray, height: float, n: int = 400)
     return out.reshape(-1)
 
 
+# One spec and terrain shape for the zone tests below: SENSE compiles once for all of them.
+SPEC2 = ToFSpec(num_sensors=2, tilt_deg=((0.0, 0.0), (17.0, 0.0)), offset_m=((0.0, 0.0, 0.0),) * 2)
+
+
 def test_flat_floor_zone_minimum_closed_form():
-    spec = ToFSpec(
-        num_sensors=2, tilt_deg=((0.0, 0.0), (17.0, 0.0)), offset_m=((0.0, 0.0, 0.0),) * 2
-    )
+    spec = SPEC2
     h = 0.4
     pos = jp.array([[0.1, 0.2, h], [-0.1, 0.0, h]])
     rot = jp.asarray(np.stack([DOWN, DOWN]))
@@ -325,24 +331,27 @@ def test_flat_floor_zone_minimum_closed_form():
 
 
 def test_step_edge_lights_forward_zones():
-    spec = ToFSpec(num_sensors=1, tilt_deg=((0.0, 0.0),), offset_m=((0.0, 0.0, 0.0),))
     h = np.zeros((61, 61), np.float32)
     xs = -1.2 + np.arange(61) * CELL
     h[:, xs >= 0.2] = 0.2  # a 0.2 m step, edge at x = 0.2 (vertices >= 0.2)
     hf = Heightfield(heights=jp.asarray(h), x0_m=-1.2, y0_m=-1.2, cell_m=CELL)
-    # Sensor above x = 0.2 + 1 cell: rows 2, 3 (sensor +x = world +x) see the step top.
-    r = SENSE(spec, hf, jp.array([[0.24, 0.0, 0.5]]), jp.asarray(DOWN[None]))
-    z = np.asarray(r.distance_m).reshape(4, 4)
+    # Sensor 0 (untilted) above x = 0.2 + 1 cell: rows 2, 3 (sensor +x = world +x) see the top.
+    pos = jp.array([[0.24, 0.0, 0.5], [-0.5, 0.0, 0.5]])
+    r = SENSE(SPEC2, hf, pos, jp.asarray(np.stack([DOWN, DOWN])))
+    z = np.asarray(r.distance_m)[0].reshape(4, 4)
     assert np.all(z[2:] < 0.33) and np.all(z[2:] > 0.29)  # 0.3 m to the step top
     assert np.all(z[:1] > 0.45)  # far back rows: the floor 0.5 m down
     assert np.all(z[2:].max() < z[:1].min())
 
 
 def test_clipping_at_max_range():
-    spec = ToFSpec(num_sensors=2, tilt_deg=((0.0, 0.0),) * 2, offset_m=((0.0, 0.0, 0.0),) * 2)
-    pos = jp.array([[0.0, 0.0, 1.2], [0.0, 0.0, 0.97]])
-    r = SENSE(spec, _flat(), pos, jp.asarray(np.stack([DOWN, DOWN])))
-    dist, valid = np.asarray(r.distance_m).reshape(2, 4, 4), np.asarray(r.valid).reshape(2, 4, 4)
+    rot = jp.asarray(np.stack([DOWN, DOWN]))
+    # The untilted sensor 0 at 1.2 m and at 0.97 m (sensor 1, tilted, is not looked at).
+    r = [
+        SENSE(SPEC2, _flat(), jp.array([[0.0, 0.0, z], [0.0, 0.0, 0.5]]), rot) for z in (1.2, 0.97)
+    ]
+    dist = np.stack([np.asarray(x.distance_m)[0] for x in r]).reshape(2, 4, 4)
+    valid = np.stack([np.asarray(x.valid)[0] for x in r]).reshape(2, 4, 4)
     assert not valid[0].any() and np.all(dist[0] == 1.0)
     corners = np.zeros((4, 4), bool)
     corners[[0, 0, 3, 3], [0, 3, 0, 3]] = True

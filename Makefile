@@ -31,7 +31,7 @@ wheels: $(STAMP)
 # Fast suite (what CI runs): everything not marked slow, plus lint.
 test: $(STAMP) render-deps
 	$(VENV)/bin/ruff check .
-	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 --dist loadfile -q
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 --dist loadfile --no-loadscope-reorder -q
 
 test-slow: $(STAMP)
 	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q

@@ -16,3 +16,24 @@ if _level and "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS"
     os.environ["XLA_FLAGS"] = (
         os.environ.get("XLA_FLAGS", "") + f" --xla_backend_optimization_level={_level}"
     ).strip()
+
+
+# Heaviest modules first. `make test` hands whole modules to its 2 workers (--dist loadfile) in
+# collection order (--no-loadscope-reorder; xdist's default orders them by number of tests, which
+# left the ~4-minute test_analysis.py for last while the other worker idled). Seconds per module,
+# summed over its tests, from `pytest --durations=0` (bench/NOTES.md item 11): env 419, sensors
+# 370, sources 263, analysis 227, evaluate 196, ppo 193, terrain 116; the rest < 60 each.
+_HEAVY_FIRST = (
+    "test_env.py",
+    "test_sensors.py",
+    "test_sources.py",
+    "test_analysis.py",
+    "test_evaluate.py",
+    "test_ppo.py",
+    "test_terrain.py",
+)
+
+
+def pytest_collection_modifyitems(session, config, items):
+    rank = {name: i for i, name in enumerate(_HEAVY_FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(_HEAVY_FIRST)))  # stable sort

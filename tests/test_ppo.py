@@ -2,6 +2,7 @@
 
 import csv
 import os
+import re
 
 import jax
 import jax.numpy as jp
@@ -304,6 +305,7 @@ def test_resume_equals_straight_run(tmp_path, capsys):
     assert any(n.startswith("events.out.tfevents") for n in os.listdir(run_b))
     out = capsys.readouterr().out
     assert "compiled in" in out and "it 4/4" in out and "success" in out and "reward: recall" in out
+    assert re.search(r"params; init \d+\.\d s, compiled in \d+\.\d s", out)
     with pytest.raises(FileExistsError):
         runner.run(tiny_cfg(num_iterations=4), env, str(run_b))
 

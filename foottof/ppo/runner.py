@@ -291,7 +291,9 @@ def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.
 
     trainer, iteration, cached = _trainer(env, cfg)
     key = jax.random.PRNGKey(int(cfg.get("seed", 0)))
-    state = trainer.init(key)
+    t_init = time.time()
+    state = trainer.init(key)  # compiles env reset + network init, then dispatches it
+    init_s = time.time() - t_init
     checkpointer = ckpt.Checkpointer(run_dir, int(t.max_checkpoints), bool(t.checkpoint_env_state))
     if resume:
         state, restored_rollout = checkpointer.restore(state)
@@ -315,8 +317,8 @@ def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.
     print(
         f"[runner] {len(trainer.mesh.devices.flat)} {jax.default_backend()} device(s), "
         f"{trainer.num_envs} envs x {cfg.ppo.num_steps} steps, "
-        f"{train_lib.num_params(state.params)} params; compiled in {compile_s:.1f} s"
-        + (" (cached)" if cached else "")
+        f"{train_lib.num_params(state.params)} params; init {init_s:.1f} s, "
+        f"compiled in {compile_s:.1f} s" + (" (cached)" if cached else "")
     )
 
     logs = _Logs(run_dir, bool(t.tensorboard)) if main else None

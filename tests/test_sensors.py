@@ -359,11 +359,11 @@ def _brute_patch_min(points: np.ndarray, ok: np.ndarray, n: int = 240) -> float:
 @pytest.mark.parametrize("seed", range(2))
 def test_zone_minimum_equals_its_sampled_patch(surface, seed):
     """Random returns on the 2 sensors of SPEC2, 15 % misses: a plane tilted up to 20 deg from
-    sensor 0's optical axis, 0.2-0.6 m away (its nearest point lies inside a fan triangle,
-    between the rays, where only the triangle term finds it), or rough (each ray 0.15-0.9 m). Every zone must read the nearest
-    point of its interpolation patch, found here by dense sampling: the samples lie on the
-    patch, so the reading may not exceed their minimum (beyond float32 rounding), and sampling
-    every ~3 mm overestimates a minimum by < 2e-5 m."""
+    sensor 0's optical axis, 0.2-0.6 m away (its nearest point can lie inside a fan triangle,
+    between the rays, where only the triangle term finds it: seed 0), or rough (each ray
+    0.15-0.9 m). Every zone must read the nearest point of its interpolation patch, found here
+    by dense sampling: the samples lie on the patch, so the reading may not exceed their minimum
+    (beyond float32 rounding), and sampling every ~3 mm overestimates a minimum by < 2e-5 m."""
     spec = SPEC2
     rng = np.random.default_rng(seed)
     rays = spec.ray_directions()

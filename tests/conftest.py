@@ -4,8 +4,9 @@ The fast suite is compile-bound (most of its time is XLA compiling the env, the 
 PPO iterations for a few steps each). Level 1 instead of XLA's default cuts those compiles by
 about a third (the env's reset and step: 25 -> 16 s and 32 -> 22 s on a 2-core machine) and the
 suite from ~1000 s to ~760 s (bench/NOTES.md item 11). All tests pass at level 1, and where we
-compared values (the level-0 case below) level 1 gave the default's bit for bit. Level 0 was faster still (~580 s) but one jitted program
-(``aggre_init``) then disagreed with its own stored map, so we do not use it.
+compared values (the level-0 case below) level 1 gave the default's bit for bit. Level 0 was
+faster still (~580 s) but one jitted program (``aggre_init``) then disagreed with its own stored
+map, so we do not use it.
 Set FOOTTOF_TEST_XLA_OPT to another level (or to "" for XLA's default) to override.
 """
 

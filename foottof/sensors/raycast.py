@@ -276,13 +276,11 @@ def _geometry(hf: Heightfield) -> tuple:
     return (hf.heights.shape, hf.x0_m, hf.y0_m, hf.cell_m, hf.z_floor_m, hf.z_range_m, hf.base_m)
 
 
-@functools.partial(jax.jit, static_argnums=(4, 5, 6, 7))
-def _walk_traced_once(h_flat, o, d, base, geometry: tuple, max_range_m: float, first, count):
-    """:func:`_walk` of one ray, traced once per (terrain geometry, range, strips): it is traced
-    per ray (under ``vmap``), so every round and every cast of the same walk reuses the trace
-    (Python tracing of the walk was ~0.55 s each, 40 times in a program with 4 ray casts)."""
+def _meta(geometry: tuple) -> Heightfield:
+    """A heights-free Heightfield of ``geometry`` (:func:`_geometry`): zeros broadcast to its
+    shape, so it can be closed over while the heights travel traced (as ``h_flat``)."""
     shape, x0, y0, cell, z_floor, z_range, base_m = geometry
-    meta = Heightfield(
+    return Heightfield(
         heights=np.broadcast_to(np.float32(0.0), shape),
         x0_m=x0,
         y0_m=y0,
@@ -291,7 +289,14 @@ def _walk_traced_once(h_flat, o, d, base, geometry: tuple, max_range_m: float, f
         z_range_m=z_range,
         base_m=base_m,
     )
-    return _walk(h_flat, meta, o, d, max_range_m, first, count, base)
+
+
+@functools.partial(jax.jit, static_argnums=(4, 5, 6, 7))
+def _walk_traced_once(h_flat, o, d, base, geometry: tuple, max_range_m: float, first, count):
+    """:func:`_walk` of one ray, traced once per (terrain geometry, range, strips): it is traced
+    per ray (under ``vmap``), so every round and every cast of the same walk reuses the trace
+    (Python tracing of the walk was ~0.55 s each, 40 times in a program with 4 ray casts)."""
+    return _walk(h_flat, _meta(geometry), o, d, max_range_m, first, count, base)
 
 
 def _surface_adaptive(h_flat, meta, origins, unit, r: float, n_strips: int, rounds, bases):
@@ -397,8 +402,7 @@ def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool
     unit = directions / jp.where(norm > 0.0, norm, 1.0)
     h_flat = hfield.clipped().heights.astype(dt).reshape(-1)
     n_strips = num_strips(hfield, r)
-    # Static geometry only (heights may be traced: they travel as h_flat).
-    meta = hfield.replace(heights=np.broadcast_to(np.float32(0.0), hfield.heights.shape))
+    meta = _meta(_geometry(hfield))  # static geometry only (heights travel traced, as h_flat)
     if adaptive:
         bases = jp.zeros(origins.shape[0], jp.int32)
         t_tri, g = _surface_fn(meta, r, n_strips)(h_flat, origins, unit, bases)

@@ -49,7 +49,7 @@ def get_section() -> ml_collections.ConfigDict:
 def _add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     """Adds the goal-reaching task fields: episode, observations, terminations, randomization."""
     e.source = "tof"  # foot-reading source: tof | mock_ideal | mock_aggre
-    e.episode_length_s = 10.0  # episode length: the goal is ~3.9 m away on a 6 m tile [s]
+    e.episode_length_s = 10.0  # episode length: the goal is ~4.7 m from the spawn on a 6 m tile [s]
     e.clip_actions = 5.0  # actions are clipped to +-this before scaling [-]
     e.clip_observations = 100.0  # observations are clipped to +-this (rsl_rl convention) [-]
     e.clip_reward = 100.0  # each scaled reward term is clipped to +-this per step [-]
@@ -64,6 +64,10 @@ def _add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     e.bootstrap_time_limit = False  # bootstrap V at the deadline; False: the deadline is terminal
     e.fall_height_above_floor_m = 0.5  # base below pit floor + this terminates (fell in a gap) [m]
     e.foot_fall_z_m = -0.45  # a foot below this world z terminates (deep in a gap) [m]
+    # A foot centre this far below the highest terrain within 5 cm of it, beside a gap, terminates
+    # (the foot went into a gap: wedged or falling; 0 = off); logged as episode/foot_stuck [m].
+    e.foot_stuck_depth_m = 0.12
+    e.critic_height_scan = False  # critic also sees 171 terrain heights around/ahead of the base
     e.max_tilt_deg = 60.0  # base tilt beyond this terminates [deg]
     e.init_joint_noise_rad = 0.05  # initial joint angles ~ default + U(+-this) [rad]
     e.init_roll_pitch_rad = 0.0  # initial roll, pitch ~ U(+-this) [rad] (wider in stage 2)

@@ -64,4 +64,5 @@ def get_section() -> ml_collections.ConfigDict:
     c.init_level_max = 2  # initial level ~ U{0..init_level_max} [level]
     c.down_progress_frac = 0.5  # move down when covered < this fraction of the goal distance [-]
     c.up_progress_frac = 0.8  # move up when covered >= this fraction (or reached the goal) [-]
+    c.no_promotion_on_fall = True  # an episode that ended in a failure is not promoted [-]
     return c

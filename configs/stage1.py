@@ -6,5 +6,6 @@ from configs import base
 def get_config():
     c = base.get_config()
     c.stage = 1  # terrain mix and degradation uppers of stage 1
+    c.env.critic_height_scan = True  # privileged base-centred height scan for the critic
     c.train.run_name = "stage1"  # run directory name under train.run_root
     return c

@@ -183,6 +183,7 @@ RULES = {
     "terrain.down_progress_frac": _frac,
     "terrain.up_progress_frac": _frac,
     "terrain.flat": _bool,
+    "terrain.no_promotion_on_fall": _bool,
     # sensor, noise
     "sensor.sites": _non_empty_strs,
     "sensor.grid": _choice(*TOF_MAX_RATE_HZ),
@@ -228,6 +229,8 @@ RULES = {
     "env.knee_contact_terminates": _bool,
     "env.bootstrap_time_limit": _bool,
     "env.fall_height_above_floor_m": _nonneg,
+    "env.foot_stuck_depth_m": _num(0.0, 1.0),
+    "env.critic_height_scan": _bool,
     "env.max_tilt_deg": _num(0.0, 180.0, lo_open=True),
     "env.init_joint_noise_rad": _nonneg,
     "env.init_roll_pitch_rad": _num(0.0, math.pi / 2),

@@ -34,12 +34,57 @@ from foottof.terrain.terrain_map import (
 EPISODE_METRICS = (
     "episode/success",
     "episode/failed",
+    "episode/foot_stuck",
     "episode/goal_dist_m",
     "episode/progress",
     "curriculum/level",
     "episode/speed_ms",
 )
 STEP_METRICS = ("task/speed_ms", "task/feet_at_edges")  # averaged over all steps by the trainer
+
+# Stuck-foot probe: the terrain within this radius of a foot centre (the centre and 8 points on
+# the circle) is what the foot is compared against; one cell (4 cm) and a margin, so that the tops
+# beside a one-vertex notch are in reach [m].
+STUCK_PROBE_RADIUS_M = 0.05
+# A gap, not a step: the probed terrain spans more than this (pits lie >= 0.8 m below the stone
+# tops; stairs, boxes and drawn cracks span <= 0.3 m within 5 cm) [m].
+STUCK_GAP_SPAN_M = 0.4
+_STUCK_PROBE = tuple(
+    (
+        STUCK_PROBE_RADIUS_M * math.cos(k * math.pi / 4),
+        STUCK_PROBE_RADIUS_M * math.sin(k * math.pi / 4),
+    )
+    for k in range(8)
+) + ((0.0, 0.0),)
+
+
+def foot_stuck(foot_pos: jax.Array, height_at, depth_m: float) -> jax.Array:
+    """(F,) bool: a foot went into a gap (wedged in a drawn notch, or falling through): its centre
+    lies more than ``depth_m`` below the highest terrain within STUCK_PROBE_RADIUS_M, and that
+    terrain spans a gap (more than STUCK_GAP_SPAN_M from its lowest to its highest point)."""
+    offs = jp.asarray(_STUCK_PROBE, jp.float32)
+    around = height_at(foot_pos[:, None, :2] + offs[None])  # (F, 9)
+    top, bottom = jp.max(around, axis=-1), jp.min(around, axis=-1)
+    return (foot_pos[:, 2] < top - depth_m) & (top - bottom > STUCK_GAP_SPAN_M)
+
+
+def critic_height_scan(height_at, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
+    """(P,) terrain heights relative to the base at :func:`critic_scan_points`, turned with the
+    base's heading (yaw only), clipped to +-1 m [m]."""
+    fwd = kinematics.quat_to_mat(base_quat)[:2, 0]  # base x axis, horizontal part
+    fwd = fwd / jp.maximum(jp.linalg.norm(fwd), 1e-6)
+    rot = jp.array([[fwd[0], -fwd[1]], [fwd[1], fwd[0]]])  # yaw rotation
+    pts = base_pos[None, 0:2] + critic_scan_points() @ rot.T
+    return jp.clip(height_at(pts) - base_pos[2], -1.0, 1.0)
+
+
+def critic_scan_points() -> jax.Array:
+    """(P, 2) base-yaw-frame x, y of the critic's height scan: x -0.6..1.2 m, y -0.4..0.4 m,
+    10 cm apart (19 x 9 = 171 points; legged_gym's grid, shifted forward to see the next gaps)."""
+    xs = jp.linspace(-0.6, 1.2, 19)
+    ys = jp.linspace(-0.4, 0.4, 9)
+    gx, gy = jp.meshgrid(xs, ys, indexing="ij")
+    return jp.stack([gx.reshape(-1), gy.reshape(-1)], axis=-1)
 
 
 @struct.dataclass
@@ -219,7 +264,7 @@ class AnymalToFEnv(Env):
             float(rcfg.edge_height_m),
         )
         gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
-        failed, knee_contact = self._failed(d, gravity, fk)
+        failed, knee_contact, stuck = self._failed(d, gravity, fk)
         failed = failed | diverged
         truncated = (step >= self.episode_steps) & ~failed
         done = failed | truncated
@@ -261,7 +306,7 @@ class AnymalToFEnv(Env):
             last_action=action,
             last_qvel=qvel[6:18],
         )
-        new_level, new_col = self._curriculum(key_reset, task, base_pos[:2], success)
+        new_level, new_col = self._curriculum(key_reset, task, base_pos[:2], success, failed)
         fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
         fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
         sel = lambda a, b: jax.tree_util.tree_map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
@@ -277,6 +322,7 @@ class AnymalToFEnv(Env):
             {
                 "episode/success": success,
                 "episode/failed": failed.astype(jp.float32),
+                "episode/foot_stuck": stuck.astype(jp.float32),
                 "episode/goal_dist_m": dist,
                 "episode/progress": self._progress(task, base_pos[:2]),
                 "curriculum/level": task.level.astype(jp.float32),
@@ -315,9 +361,10 @@ class AnymalToFEnv(Env):
         lever = fk.foot_pos - qpos[0:3]
         return fk, qvel[0:3] + jp.cross(omega_w, lever) + dfk.foot_pos
 
-    def _failed(self, d, gravity, fk: kinematics.FootKinematics) -> tuple[jax.Array, jax.Array]:
-        """Failure (base touches the terrain, falls into a gap, bad orientation; knee contact too
-        if ``env.knee_contact_terminates``) and (4,) knee contacts (1.0 where a knee touches)."""
+    def _failed(self, d, gravity, fk: kinematics.FootKinematics):
+        """Failure (base touches the terrain, falls into a gap, a foot stuck in a gap, bad
+        orientation; knee contact too if ``env.knee_contact_terminates``), (4,) knee contacts
+        (1.0 where a knee touches) and whether a foot is stuck (``foot_stuck``, its own reason)."""
         ecfg = self.cfg.env
         base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
         centres = kinematics.base_to_world(
@@ -332,13 +379,18 @@ class AnymalToFEnv(Env):
             body_contact = body_contact | jp.any(knee_contact)
         fell = base_pos[2] < self.hfield.z_floor_m + float(ecfg.fall_height_above_floor_m)
         fell = fell | (jp.min(fk.foot_pos[:, 2]) < float(ecfg.foot_fall_z_m))
+        stuck_depth = float(ecfg.get("foot_stuck_depth_m", 0.0))
+        stuck = jp.zeros((), bool)
+        if stuck_depth > 0:
+            stuck = jp.any(foot_stuck(fk.foot_pos, self.hfield.height_at, stuck_depth))
         flipped = gravity[2] > -math.cos(math.radians(float(ecfg.max_tilt_deg)))
-        return body_contact | fell | flipped, knee_contact.astype(jp.float32)
+        failed = body_contact | fell | stuck | flipped
+        return failed, knee_contact.astype(jp.float32), stuck
 
     def _progress(self, task: TaskState, base_xy) -> jax.Array:
         return curriculum.progress_fraction(task.spawn[:2], task.goal, base_xy)
 
-    def _curriculum(self, key, task: TaskState, base_xy, success):
+    def _curriculum(self, key, task: TaskState, base_xy, success, failed):
         level = curriculum.update_levels(
             key,
             task.level,
@@ -348,6 +400,7 @@ class AnymalToFEnv(Env):
             num_levels=self.tmap.num_levels,
             down_progress_frac=float(self.cfg.terrain.down_progress_frac),
             up_progress_frac=float(self.cfg.terrain.up_progress_frac),
+            failed=failed if bool(self.cfg.terrain.get("no_promotion_on_fall", False)) else None,
         )
         return level, task.col
 
@@ -423,7 +476,9 @@ class AnymalToFEnv(Env):
         action (12).
         Critic ``privileged_state``: the same without noise (true readings, joints, velocities)
         + true terrain heights around each foot relative to the foot centre (4 x 9, 10 cm grid)
-        + foot contacts (4) + friction (1) + added base mass (1, x0.1).
+        + foot contacts (4) + friction (1) + added base mass (1, x0.1) + with
+        ``env.critic_height_scan``, the terrain heights relative to the base at
+        :func:`critic_scan_points` (171, base-yaw frame, clipped to +-1 m).
         """
         p = task.params
         qpos, qvel = d.qpos, d.qvel
@@ -466,15 +521,16 @@ class AnymalToFEnv(Env):
         clear = fk.foot_pos[:, 2] - self.hfield.height_at(fk.foot_pos[:, :2])
         margin = self.foot_radius_m + float(self.cfg.env.contact_margin_m)
         contact = (clear < margin).astype(jp.float32)
-        priv = jp.concatenate(
-            [
-                clean,
-                jp.clip(heights.reshape(-1), -1.0, 1.0),  # 4 feet x 9 heights [m]
-                contact,  # 4
-                p.friction[None],  # 1
-                p.added_mass_kg[None] * 0.1,  # 1
-            ]
-        )
+        parts = [
+            clean,
+            jp.clip(heights.reshape(-1), -1.0, 1.0),  # 4 feet x 9 heights [m]
+            contact,  # 4
+            p.friction[None],  # 1
+            p.added_mass_kg[None] * 0.1,  # 1
+        ]
+        if bool(self.cfg.env.get("critic_height_scan", False)):
+            parts.append(critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat))  # 171
+        priv = jp.concatenate(parts)
         lim = float(self.cfg.env.clip_observations)
         return {
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),

@@ -175,8 +175,57 @@ class Checkpointer:
         self._manager.close()
 
 
+# Leaves that read the critic's observation: when a run adds critic inputs at the end (e.g.
+# env.critic_height_scan), init_from a run without them grows these along their first axis.
+_CRITIC_INPUT_LEAVES = (
+    "['memory_c']['lstm_0']['ii']['kernel']",
+    "['memory_c']['lstm_0']['if']['kernel']",
+    "['memory_c']['lstm_0']['ig']['kernel']",
+    "['memory_c']['lstm_0']['io']['kernel']",
+    "['critic']['dense_0']['kernel']",  # network.policy = mlp: the critic MLP reads the obs
+    "['privileged_state']",  # normalizer mean / std / summed_variance
+)
+
+
+def _grown_leaves(saved_manifest: list, target: Any) -> dict[str, tuple]:
+    """{leaf name: saved shape} of critic-input leaves the checkpoint holds with fewer inputs
+    (a shorter first axis, the rest equal) than `target`."""
+    saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
+    out = {}
+    for path, x in jax.tree_util.tree_flatten_with_path(target)[0]:
+        name = jax.tree_util.keystr(path)
+        old, new = saved.get(name), tuple(np.shape(x))
+        if (
+            old is not None
+            and any(k in name for k in _CRITIC_INPUT_LEAVES)
+            and len(old) == len(new) >= 1
+            and old[0] < new[0]
+            and old[1:] == new[1:]
+        ):
+            out[name] = old
+    return out
+
+
+def _grow(name: str, value: Any, shape: tuple, count: float) -> np.ndarray:
+    """`value` embedded in `shape` along axis 0: new kernel rows 0 (new inputs start unused),
+    new normalizer entries mean 0, std 1 and summed variance `count` (variance 1)."""
+    value = np.asarray(value)
+    fill = 0.0
+    if ".std[" in name:
+        fill = 1.0
+    elif ".summed_variance[" in name:
+        fill = count
+    pad = np.full((shape[0] - value.shape[0], *value.shape[1:]), fill, value.dtype)
+    return np.concatenate([value, pad], axis=0)
+
+
 def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple[Any, Any]:
     """Params + normalizer of another run (init_from), shaped like `params`/`normalizer`.
+
+    A run whose critic reads more inputs than the saved one's (inputs appended at the end, e.g.
+    env.critic_height_scan) starts from it too: the critic's input weights for the new inputs
+    are zero and their normalizer entries mean 0 / variance 1, so its value function starts as
+    the saved one's (one line says so).
 
     Args:
       path: a run directory, its checkpoints/ folder, or one checkpoint's step folder.
@@ -205,15 +254,48 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
             step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
         ).manifest
         target = {"params": {"params": params}, "normalizer": {"normalizer": normalizer}}
+        grown, saved_like = {}, {}
         for item, sub in target.items():
             if item not in manifest:
                 raise ValueError(f"init_from {directory}/{step}: checkpoint has no {item!r}")
-            check_compatible(item, manifest[item], sub, f"init_from {directory}/{step}")
-        args = {item: ocp.args.StandardRestore(_abstract(sub)) for item, sub in target.items()}
+            grown[item] = _grown_leaves(manifest[item], sub)
+            saved_like[item] = jax.tree_util.tree_map_with_path(
+                lambda p, x, g=grown[item]: (
+                    jax.ShapeDtypeStruct(g[jax.tree_util.keystr(p)], x.dtype)
+                    if jax.tree_util.keystr(p) in g
+                    else x
+                ),
+                sub,
+            )
+            check_compatible(
+                item, manifest[item], saved_like[item], f"init_from {directory}/{step}"
+            )
+        args = {item: ocp.args.StandardRestore(_abstract(sub)) for item, sub in saved_like.items()}
         restored = manager.restore(step, args=ocp.args.Composite(**args))
     finally:
         manager.close()
     out = []
     for item, sub in target.items():
-        out.append(_unflatten(sub, restored[item])[item])
+        tree = _unflatten(saved_like[item], restored[item])
+        if grown[item]:
+            count = 0.0
+            if item == "normalizer":
+                c = tree["normalizer"].count
+                count = float(np.asarray(getattr(c, "hi", 0))) * 2.0**32 + float(
+                    np.asarray(getattr(c, "lo", c))
+                )
+            tree = jax.tree_util.tree_map_with_path(
+                lambda p, x, t, g=grown[item], n=count: (
+                    jax.numpy.asarray(_grow(jax.tree_util.keystr(p), x, np.shape(t), n))
+                    if jax.tree_util.keystr(p) in g
+                    else x
+                ),
+                tree,
+                sub,
+            )
+            print(
+                f"[init_from] {item}: critic inputs grown on {len(grown[item])} leaves "
+                f"(new inputs start with zero weight)"
+            )
+        out.append(tree[item])
     return out[0], out[1]

@@ -154,8 +154,13 @@ def run_config_path(checkpoint: str) -> str | None:
     return None
 
 
+# Env fields that shape the network's inputs: taken from the run config along with c.network.
+RUN_INPUT_FIELDS = ("critic_height_scan",)
+
+
 def with_run_network(cfg, checkpoint: str | None):
-    """`cfg` (a ConfigDict) with c.network from the checkpoint's run config (if it has one)."""
+    """`cfg` (a ConfigDict) with c.network, and the env fields that shape the network's inputs
+    (RUN_INPUT_FIELDS), from the checkpoint's run config (if it has one)."""
     path = run_config_path(checkpoint) if checkpoint else None
     if path is None:
         return cfg
@@ -168,4 +173,6 @@ def with_run_network(cfg, checkpoint: str | None):
         for k, v in saved["network"].items():
             if k in c.network:
                 c.network[k] = tuple(v) if isinstance(v, list) else v
+        for k in RUN_INPUT_FIELDS:
+            c.env[k] = bool(saved.get("env", {}).get(k, False))
     return c

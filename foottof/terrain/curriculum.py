@@ -34,11 +34,13 @@ def update_levels(
     num_levels: int,
     down_progress_frac: float = 0.5,
     up_progress_frac: float = 1.0,
+    failed: jax.Array | None = None,
 ) -> jax.Array:
     """New curriculum levels of envs whose episode ended (others keep theirs).
 
     An env that reached its goal, or covered at least ``up_progress_frac`` of the distance to it
-    (legged_gym promotes on distance walked, not on full success), moves up one level; one that
+    (legged_gym promotes on distance walked, not on full success) without failing (a fall near
+    the goal does not promote: it would pay rushing), moves up one level; one that
     solved the top level goes to a random level ~ U{0, ..., num_levels - 1}; one that did not reach
     the goal and covered less than
     ``down_progress_frac`` of the distance moves down one level (not below 0); any other stays.
@@ -53,6 +55,8 @@ def update_levels(
       down_progress_frac: threshold on ``progress`` to move down (static), in [0, 1].
       up_progress_frac: threshold on ``progress`` to move up without reaching the goal (static),
         in [down_progress_frac, 1]; 1 (default) = only reaching the goal promotes.
+      failed: (N,) bool, the episode ended in a failure (None: no failures); a failed episode is
+        not promoted on progress.
 
     Returns:
       (N,) int32 new levels.
@@ -68,7 +72,10 @@ def update_levels(
             f"[down_progress_frac={down_progress_frac}, 1]"
         )
     level = jp.asarray(level, jp.int32)
-    up = jp.asarray(reached_goal, bool) | (jp.asarray(progress) >= up_progress_frac)
+    far = jp.asarray(progress) >= up_progress_frac
+    if failed is not None:
+        far = far & ~jp.asarray(failed, bool)
+    up = jp.asarray(reached_goal, bool) | far
     down = ~up & (jp.asarray(progress) < down_progress_frac)
     new = level + up.astype(jp.int32) - down.astype(jp.int32)
     random_level = jax.random.randint(key, level.shape, 0, num_levels, dtype=jp.int32)

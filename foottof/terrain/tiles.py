@@ -37,10 +37,60 @@ SPAWN_SURFACE_Z_M = {name: 0.0 for name in TERRAIN_TYPES}
 # vertex is therefore solid when it lies within half a cell of a stone, platform or beam: the mean
 # flat-top extent is then the nominal size and the mean top opening of a gap the nominal gap (for
 # gaps wider than two cells); gaps narrower than one cell, which no foot fits, are not drawn.
+#
+# Cracks (see _finish). A gap 4-12 cm wide is drawn as one or two pit vertices: a V-notch whose
+# sloped walls wedge a foot sphere (MuJoCo C: a 3.15 cm foot pressed with 130 N stuck 0.26 m deep
+# in a one-vertex notch, 0.77 m in a two-vertex one; ../shared/probes/crack_notch_drop.py). A real
+# crack narrower than the foot (diameter D) only lets the foot dip by the sag of a circle over a
+# chord, r - sqrt(r^2 - (w / 2)^2) <= r. So a pit vertex whose gap is nominally narrower than the
+# foot is drawn that sag below the surrounding top (the foot cannot sink deeper than the drawn
+# bottom), and only gaps at least as wide as the foot are drawn to the pit floor; a foot that goes
+# into one of those is a fall, ended by the env's stuck-foot termination (env.foot_stuck_depth_m)
+# rather than left wedged. The stone curricula never draw gaps narrower than the foot (see
+# STONE_SCHEDULES), platform gaps at their easiest level do.
 
 TWO_ROW_HALF_SPACING_M = 0.30  # row centres at y = centre +- this; ANYmal-D feet are at +-0.31 m
 STAIRS_MAX_RISE_M = 0.8  # total rise (or drop) of a stairs tile is capped at this [m]
 PYRAMID_MAX_HEIGHT_M = 0.6  # pyramids are truncated (flat top / bottom) at this height [m]
+
+# Stone curricula, piecewise linear in the difficulty d through the knots STONE_KNOTS: first the
+# gaps between few, large stones widen (d 0 -> 0.4, stones keep their size, level tops), then the
+# stones shrink and the height spread grows (0.4 -> 0.72), and from d = 0.72 (the evaluation
+# ensemble: 90 % of the stage-1 range (0, 0.8)) on, the values are those of the earlier linear
+# schedules (size, gap, spread, jitter), so the ensemble's stones and gaps are unchanged. Jitter
+# is a fraction of the gap and stone sizes do not vary while d <= 0.4: at d = 0 (level 0) every gap
+# is 4-6 cm wide, narrower than the 6.3 cm foot, and drawn as a shallow crack (harmless, as a real
+# one is); from d = 0.09 (level 1 of 10 over (0, 0.8)) on every gap is wider than the foot (at
+# least 0.8 x the nominal gap) and drawn to the pit floor. Only a difficulty in (0.007, 0.08) mixes
+# the two (gaps of 5.3-7.9 cm straddle the foot: the narrow ones are drawn deep): no level lies
+# there.
+STONE_KNOTS = (0.0, 0.4, 0.72, 1.0)
+STONE_SCHEDULES = {
+    # name: {parameter: values at STONE_KNOTS}
+    "grid_stones": {
+        "size": (1.00, 1.00, 0.2976, 0.18),  # stone top size [m]
+        "gap": (0.05, 0.20, 0.266, 0.35),  # nominal gap between stones [m]
+        "dz": (0.0, 0.0, 0.144, 0.20),  # peak-to-peak spread of the top heights [m]
+        "jitter": (0.10, 0.10, 0.25, 0.25),  # centre jitter ~ U(+-this x gap) per axis [-]
+        "f_lo": (1.0, 1.0, 0.9196, 0.90),  # size factor ~ U(f_lo, 1) per axis [-]
+    },
+    "two_row_stones": {
+        "size": (0.80, 0.80, 0.2976, 0.18),
+        "gap": (0.05, 0.24, 0.338, 0.45),
+        "dz": (0.0, 0.0, 0.108, 0.15),
+        "jitter": (0.10, 0.10, 0.20, 0.20),
+        "f_lo": (1.0, 1.0, 0.9196, 0.90),
+        "lateral": (0.0, 0.0, 0.036, 0.05),  # lateral jitter of each stone, +- [m]
+    },
+    "mixed_row_stones": {
+        "size": (0.90, 0.90, 0.2696, 0.18),  # largest stone top; each ~ U(f_lo, 1) x size [m]
+        "gap": (0.05, 0.22, 0.302, 0.40),
+        "dz": (0.0, 0.0, 0.144, 0.20),  # low bricks dz lower, high stones dz higher [m]
+        "jitter": (0.10, 0.10, 0.25, 0.25),
+        "f_lo": (1.0, 1.0, 0.806, 0.75),
+        "keep": (1.0, 1.0, 0.892, 0.85),  # probability that a stone is present [-]
+    },
+}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -60,6 +110,7 @@ class TileSpec:
       goal_length_m: goal region length along x [m].
       pit_z_m: pit floor z [m]; also the Heightfield floor (elevation 0).
       z_range_m: heights are clipped to [pit_z_m, pit_z_m + z_range_m] [m].
+      foot_radius_m: foot sphere radius that sets how cracks are drawn (see Cracks above) [m].
     """
 
     length_m: float = 6.0
@@ -69,8 +120,11 @@ class TileSpec:
     goal_length_m: float = 1.0
     pit_z_m: float = -1.0
     z_range_m: float = 2.0
+    foot_radius_m: float = 0.0315
 
     def __post_init__(self):
+        if not 0.0 < self.foot_radius_m <= 0.1:
+            raise ValueError(f"foot_radius_m={self.foot_radius_m} must be in (0, 0.1] m")
         if not 0.0 < self.cell_m <= 0.04:
             raise ValueError(f"cell_m={self.cell_m} must be in (0, 0.04] m")
         for name in ("length_m", "width_m", "platform_length_m", "goal_length_m"):
@@ -158,6 +212,23 @@ def _lerp(easy: float, hard: float, d: jax.Array) -> jax.Array:
     return easy + (hard - easy) * d
 
 
+def stone_params(name: str, d) -> dict:
+    """The stone schedule of ``name`` (STONE_SCHEDULES) at difficulty ``d`` (piecewise linear)."""
+    return {
+        k: jp.interp(d, jp.asarray(STONE_KNOTS), jp.asarray(v, jp.float32))
+        for k, v in STONE_SCHEDULES[name].items()
+    }
+
+
+def crack_sag_m(width_m, foot_radius_m: float):
+    """How far a sphere of ``foot_radius_m`` dips into a straight crack of ``width_m`` with
+    vertical walls: the sagitta r - sqrt(r^2 - (w/2)^2); ``foot_radius_m`` (the sphere's bottom
+    reaches the crack's mouth) when the crack is as wide as the foot or wider [m]."""
+    r = foot_radius_m
+    half = jp.minimum(jp.asarray(width_m, jp.float32) / 2, r)
+    return r - jp.sqrt(jp.maximum(r * r - half * half, 0.0))
+
+
 def _grid(spec: TileSpec) -> tuple[jax.Array, jax.Array]:
     """(ny, nx) local x and y of every vertex [m]."""
     x = jp.arange(spec.nx, dtype=jp.float32) * spec.cell_m
@@ -210,12 +281,33 @@ def _drawn_solid(offset: jax.Array, extent: jax.Array, spec: TileSpec) -> jax.Ar
     return jp.abs(offset) <= extent / 2 + spec.cell_m / 2
 
 
-def _finish(z: jax.Array, spec: TileSpec, pit_in_course: jax.Array | None = None) -> jax.Array:
-    """Sets the start platform and goal region to z = 0 and clips to the representable range."""
+def _finish(
+    z: jax.Array,
+    spec: TileSpec,
+    pit_in_course: jax.Array | None = None,
+    gap_width_m: jax.Array | float | None = None,
+) -> jax.Array:
+    """Draws the pits, sets the start platform and goal region to z = 0 and clips to the
+    representable range.
+
+    Args:
+      z: (ny, nx) surface heights (at pit vertices: the top of the solid they belong to) [m].
+      spec: tile geometry.
+      pit_in_course: (ny, nx) bool, vertices in a gap (None: no pits).
+      gap_width_m: nominal width of the gap each pit vertex lies in, or an upper bound on it
+        (scalar or (ny, nx)) [m]. Where it is narrower than the foot (2 x spec.foot_radius_m), the
+        vertex is drawn ``crack_sag_m`` below ``z`` instead of at the pit floor (Cracks, above).
+        None: every pit vertex at the pit floor.
+    """
     col = jp.arange(spec.nx)[None, :]
     course = (col >= spec.n_start) & (col < spec.nx - spec.n_goal)
     if pit_in_course is not None:
-        z = jp.where(pit_in_course, spec.pit_z_m, z)
+        pit_z = jp.full(z.shape, spec.pit_z_m, jp.float32)
+        if gap_width_m is not None:
+            width = jp.broadcast_to(jp.asarray(gap_width_m, jp.float32), z.shape)
+            crack = z - crack_sag_m(width, spec.foot_radius_m)
+            pit_z = jp.where(width < 2 * spec.foot_radius_m, crack, pit_z)
+        z = jp.where(pit_in_course, pit_z, z)
     z = jp.where(course, z, 0.0)
     return jp.clip(z, spec.pit_z_m, spec.pit_z_m + spec.z_range_m).astype(jp.float32)
 
@@ -227,19 +319,18 @@ def _finish(z: jax.Array, spec: TileSpec, pit_in_course: jax.Array | None = None
 
 
 def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
-    """Dense regular grid of square stones over the pit, jittered, with random top heights."""
-    size = _lerp(0.60, 0.18, d)  # nominal stone top size [m]
-    gap = _lerp(0.05, 0.35, d)  # nominal gap between stones [m]
-    dz = _lerp(0.0, 0.20, d)  # peak-to-peak spread of the top heights [m]
+    """Regular grid of square stones over the pit, jittered, with random top heights."""
+    sp = stone_params("grid_stones", d)
+    size, gap, dz, jit = sp["size"], sp["gap"], sp["dz"], sp["jitter"]
     pitch = size + gap
     x, y = _grid(spec)
     nkx = _n_max(spec.course_x1_m - spec.course_x0_m, 0.53)
     nky = _n_max(spec.width_m, 0.53)
     k_z, k_jx, k_jy, k_fx, k_fy, k_ph = jax.random.split(key, 6)
     top = jax.random.uniform(k_z, (nky, nkx), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
-    jx = jax.random.uniform(k_jx, (nky, nkx), minval=-0.25, maxval=0.25) * gap  # centre jitter
-    jy = jax.random.uniform(k_jy, (nky, nkx), minval=-0.25, maxval=0.25) * gap
-    f_lo = _lerp(0.97, 0.9, d)  # size factor ~ U(f_lo, 1)
+    jx = jax.random.uniform(k_jx, (nky, nkx), minval=-1.0, maxval=1.0) * jit * gap  # centre jitter
+    jy = jax.random.uniform(k_jy, (nky, nkx), minval=-1.0, maxval=1.0) * jit * gap
+    f_lo = sp["f_lo"]  # size factor ~ U(f_lo, 1)
     fx = jax.random.uniform(k_fx, (nky, nkx), minval=f_lo, maxval=1.0)
     fy = jax.random.uniform(k_fy, (nky, nkx), minval=f_lo, maxval=1.0)
     phase_y = jax.random.uniform(k_ph, (), maxval=1.0) * pitch  # grid phase across y
@@ -248,15 +339,14 @@ def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     inside = _drawn_solid(lx - pitch / 2 - jx[ky, kx], size * fx[ky, kx], spec) & _drawn_solid(
         ly - pitch / 2 - jy[ky, kx], size * fy[ky, kx], spec
     )
-    return _finish(top[ky, kx], spec, pit_in_course=~inside)
+    widest = gap * (1 + 2 * jit) + size * (1 - f_lo)  # no gap of the tile is wider [m]
+    return _finish(top[ky, kx], spec, pit_in_course=~inside, gap_width_m=widest)
 
 
 def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     """Two rows of square stones along x (left and right feet), independently staggered."""
-    size = _lerp(0.60, 0.18, d)  # nominal stone top size [m]
-    gap = _lerp(0.05, 0.45, d)  # nominal gap between stones of a row [m]
-    dz = _lerp(0.0, 0.15, d)  # peak-to-peak spread of the top heights [m]
-    lateral = _lerp(0.0, 0.05, d)  # lateral jitter of each stone, +- [m]
+    sp = stone_params("two_row_stones", d)
+    size, gap, dz, jit, lateral = sp["size"], sp["gap"], sp["dz"], sp["jitter"], sp["lateral"]
     pitch = size + gap
     x, y = _grid(spec)
     n = _n_max(spec.course_x1_m - spec.course_x0_m, 0.63)
@@ -266,9 +356,9 @@ def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     for side, k_row in zip((-1.0, 1.0), jax.random.split(key, 2), strict=True):
         k_z, k_jx, k_jy, k_f, k_ph = jax.random.split(k_row, 5)
         top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
-        jx = jax.random.uniform(k_jx, (n,), minval=-0.2, maxval=0.2) * gap
+        jx = jax.random.uniform(k_jx, (n,), minval=-1.0, maxval=1.0) * jit * gap
         jy = jax.random.uniform(k_jy, (n,), minval=-1.0, maxval=1.0) * lateral
-        f = jax.random.uniform(k_f, (n,), minval=_lerp(0.97, 0.9, d))  # size ~ U(f_lo, 1)
+        f = jax.random.uniform(k_f, (n,), minval=sp["f_lo"])  # size ~ U(f_lo, 1)
         phase = jax.random.uniform(k_ph, (), maxval=0.5) * pitch  # row stagger ~ U(0, pitch/2)
         k, lx = _cell(x - spec.course_x0_m - gap / 2 - phase, pitch, n)
         yc = y_mid + side * TWO_ROW_HALF_SPACING_M + jy[k]
@@ -277,7 +367,18 @@ def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
         )
         z = jp.where(row & ~inside, top[k], z)
         inside = inside | row
-    return _finish(z, spec, pit_in_course=~inside)
+    # Along a row no gap is wider than this; beside the rows (and between them, once they no
+    # longer touch) lies open pit.
+    widest = gap * (1 + 2 * jit) + size * (1 - sp["f_lo"])
+    off = jp.abs(y - y_mid)
+    rows_touch = size + 2 * lateral >= 2 * TWO_ROW_HALF_SPACING_M
+    in_band = jp.where(
+        rows_touch,
+        off <= TWO_ROW_HALF_SPACING_M + size / 2 - lateral,
+        jp.abs(off - TWO_ROW_HALF_SPACING_M) <= size / 2 - lateral,
+    )
+    widest = jp.where(in_band, widest, jp.inf)
+    return _finish(z, spec, pit_in_course=~inside, gap_width_m=widest)
 
 
 def _rough_boxes(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
@@ -309,15 +410,18 @@ def _platform_gap(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
     k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
     z = jp.where(k >= 0, top[jp.maximum(k, 0)], 0.0)  # before the first platform: start level
-    return _finish(z, spec, pit_in_course=in_gap)
+    # Platform k - 1's top; a pit vertex lies in gap k (its nearest solid is k - 1 or k).
+    starts = jp.concatenate([jp.zeros((1,)), jp.cumsum(gaps + lengths)[:-1]])
+    g = jp.clip(jp.searchsorted(starts, x - spec.course_x0_m, side="right") - 1, 0, n - 1)
+    lower = jp.minimum(jp.where(g > 0, top[jp.maximum(g - 1, 0)], 0.0), top[g])
+    z = jp.where(in_gap, lower, z)  # a crack dips below the lower of its two platforms
+    return _finish(z, spec, pit_in_course=in_gap, gap_width_m=gaps[g])
 
 
 def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     """Rows of stones across y, each row randomly shifted; mixed sizes, bricks and high stones."""
-    size = _lerp(0.50, 0.18, d)  # largest stone top size; each ~ U(f_lo, 1) * size [m]
-    gap = _lerp(0.05, 0.40, d)  # nominal gap between stones, along x and y [m]
-    dz = _lerp(0.0, 0.20, d)  # low bricks sit dz lower, high stones dz higher [m]
-    keep = _lerp(1.0, 0.85, d)  # probability that a stone is present [-]
+    sp = stone_params("mixed_row_stones", d)
+    size, gap, dz, jit, keep = sp["size"], sp["gap"], sp["dz"], sp["jitter"], sp["keep"]
     pitch = size + gap
     x, y = _grid(spec)
     nkx = _n_max(spec.course_x1_m - spec.course_x0_m, 0.55)
@@ -327,9 +431,9 @@ def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array
     kind = jax.random.choice(k_kind, 3, (nky, nkx), p=jp.array([0.6, 0.25, 0.15]))
     regular = jax.random.uniform(k_z, (nky, nkx), minval=-0.1, maxval=0.1) * dz
     top = jp.where(kind == 1, -dz, jp.where(kind == 2, dz, regular))
-    jx = jax.random.uniform(k_jx, (nky, nkx), minval=-0.25, maxval=0.25) * gap
-    jy = jax.random.uniform(k_jy, (nky, nkx), minval=-0.25, maxval=0.25) * gap
-    f_lo = _lerp(0.95, 0.75, d)  # size factor ~ U(f_lo, 1)
+    jx = jax.random.uniform(k_jx, (nky, nkx), minval=-1.0, maxval=1.0) * jit * gap
+    jy = jax.random.uniform(k_jy, (nky, nkx), minval=-1.0, maxval=1.0) * jit * gap
+    f_lo = sp["f_lo"]  # size factor ~ U(f_lo, 1)
     fx = jax.random.uniform(k_fx, (nky, nkx), minval=f_lo, maxval=1.0)
     fy = jax.random.uniform(k_fy, (nky, nkx), minval=f_lo, maxval=1.0)
     present = jax.random.uniform(k_keep, (nky, nkx)) < keep
@@ -341,7 +445,9 @@ def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array
         & _drawn_solid(lx - pitch / 2 - jx[ky, kx], size * fx[ky, kx], spec)
         & _drawn_solid(ly - pitch / 2 - jy[ky, kx], size * fy[ky, kx], spec)
     )
-    return _finish(top[ky, kx], spec, pit_in_course=~inside)
+    widest = gap * (1 + 2 * jit) + size * (1 - f_lo)  # between present stones [m]
+    widest = jp.where(keep < 1.0, jp.inf, widest)  # a missing stone leaves a wide hole
+    return _finish(top[ky, kx], spec, pit_in_course=~inside, gap_width_m=widest)
 
 
 def _beam(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
@@ -441,12 +547,15 @@ def generate_tile(
     as static arguments under ``jax.jit``). A concrete difficulty outside [0, 1] raises ValueError;
     a traced difficulty is clipped to [0, 1].
 
-    Difficulty 0 -> 1 (linear in the parameters): stone tops shrink (grid 0.60 -> 0.18 m,
-    two-row 0.60 -> 0.18 m, mixed 0.50 -> 0.18 m), gaps widen (grid 0.05 -> 0.35 m, two-row
-    0.05 -> 0.45 m, mixed 0.05 -> 0.40 m, platform gaps 0.05 -> 0.75 m), height spread grows
-    (stones 0 -> 0.15-0.20 m, boxes 0.04 -> 0.30 m, mixed bricks/high stones +-0.20 m), the beam
-    narrows (0.80 -> 0.16 m), stairs steepen (rise 0.05 -> 0.25 m, tread 0.45 -> 0.28 m) and
-    pyramid faces steepen (slope 0.05 -> 0.45).
+    Difficulty 0 -> 1: stepping stones follow STONE_SCHEDULES (piecewise linear): gaps between
+    large stones (grid 1.0 m, two-row 0.8 m, mixed 0.9 m) widen from 5 cm cracks (d 0 -> 0.4), then the
+    stones shrink to 0.18 m and the height spread grows (stones 0 -> 0.15-0.20 m, mixed
+    bricks/high stones +-0.20 m); from d = 0.72 on they match the earlier linear schedules (grid
+    gaps -> 0.35 m, two-row -> 0.45 m, mixed -> 0.40 m). The other types are linear in d:
+    platform gaps widen (0.05 -> 0.75 m), box heights spread (0.04 -> 0.30 m), the beam narrows
+    (0.80 -> 0.16 m), stairs steepen (rise 0.05 -> 0.25 m, tread 0.45 -> 0.28 m) and pyramid faces
+    steepen (slope 0.05 -> 0.45). Gaps narrower than the foot are drawn as shallow cracks (see
+    Cracks at the top of this module).
 
     Args:
       name: one of TERRAIN_TYPES (static).

@@ -11,6 +11,7 @@ import pytest
 from scipy import ndimage
 
 from configs import _eval, _terrain
+from foottof.envs.anymal_tof import foot_stuck
 from foottof.terrain import (
     SPAWN_X,
     SPAWN_Y,
@@ -30,7 +31,6 @@ from foottof.terrain import (
     tile_at,
     update_levels,
 )
-from foottof.envs.anymal_tof import foot_stuck
 from foottof.terrain.heightfield import hfield_xml, write_to_mjmodel, write_to_mjx
 from foottof.terrain.terrain_map import tile_generator
 from foottof.terrain.tiles import STONE_TYPES, crack_sag_m, stone_params

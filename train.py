@@ -48,11 +48,18 @@ def main(argv):
     print(f"[train] {what} in {run_dir}" + (f" ({latest} links to it)" if latest else ""))
     from foottof.envs import make_training_env
     from foottof.ppo import runner
+    from foottof.ppo.checkpoint import CheckpointUnreadable
 
     try:
         env = make_training_env(cfg)
         runner.run(cfg, env, run_dir, resume=_RESUME.value, init_from=init_from, latest_link=latest)
-    except (ValueError, FileNotFoundError, FileExistsError, runner.NonFiniteError) as e:
+    except (
+        ValueError,
+        FileNotFoundError,
+        FileExistsError,
+        runner.NonFiniteError,
+        CheckpointUnreadable,
+    ) as e:
         sys.exit(f"error: {e}")
     config_file = config_flags.get_config_filename(flags.FLAGS["config"])
     print(

@@ -6,45 +6,16 @@ import re
 
 import jax
 import jax.numpy as jp
-import ml_collections
 import numpy as np
 import pytest
 from brax.envs.base import State
+from helpers import small_cfg, tiny_cfg, tree_equal
 
 from configs import _ppo
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import export, losses, runner, toy_envs
 from foottof.ppo import networks as net
 from foottof.ppo import train as train_lib
-
-
-def small_cfg(policy: str = "lstm", **ppo) -> ml_collections.ConfigDict:
-    cfg = ml_collections.ConfigDict()
-    cfg.seed = 0
-    cfg.ppo = _ppo.get_section()
-    cfg.network = _ppo.get_network_section()
-    cfg.train = _ppo.get_train_section()
-    cfg.ppo.num_envs = 64
-    cfg.ppo.num_steps = 16
-    cfg.ppo.num_minibatches = 2
-    cfg.ppo.num_epochs = 4
-    cfg.ppo.entropy_coef = 0.0
-    cfg.ppo.update(ppo)
-    cfg.network.policy = policy
-    cfg.network.lstm_hidden_size = 32
-    cfg.network.actor_hidden = (32,)
-    cfg.network.critic_hidden = (32,)
-    cfg.train.tensorboard = True
-    return cfg
-
-
-def tiny_cfg(**train) -> ml_collections.ConfigDict:
-    cfg = small_cfg(num_envs=8, num_steps=4, num_epochs=2)
-    cfg.network.lstm_hidden_size = 8
-    cfg.network.actor_hidden = (8,)
-    cfg.network.critic_hidden = (8,)
-    cfg.train.update(train)
-    return cfg
 
 
 def train_history(env, cfg, iterations: int):
@@ -55,11 +26,6 @@ def train_history(env, cfg, iterations: int):
         state, metrics = trainer.iteration(state)
         history.append({k: float(v) for k, v in metrics.items()})
     return trainer, state, history
-
-
-def tree_equal(a, b) -> bool:
-    eq = jax.tree.map(lambda x, y: bool(np.array_equal(np.asarray(x), np.asarray(y))), a, b)
-    return all(jax.tree.leaves(eq)) and jax.tree.structure(a) == jax.tree.structure(b)
 
 
 # ------------------------------------------------------------------------------------- losses

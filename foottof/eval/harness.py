@@ -11,7 +11,7 @@ import jax.numpy as jp
 import ml_collections
 
 from foottof.envs import AnymalToFEnv, make_env
-from foottof.ppo.checkpoint import load_params_and_normalizer
+from foottof.ppo.checkpoint import CheckpointUnreadable, load_params_and_normalizer
 from foottof.ppo.networks import make_networks
 
 
@@ -75,6 +75,7 @@ def load_policy(cfg, env, obs, checkpoint: str | None, key: jax.Array):
 
     Raises:
       FileNotFoundError: no checkpoint at `checkpoint`.
+      CheckpointUnreadable: the checkpoint cannot be read completely (damaged, partial copy).
       ValueError: the checkpoint's network / observation layout differs from this env's.
     """
     networks = make_networks(env.action_size, cfg.network)
@@ -88,6 +89,8 @@ def load_policy(cfg, env, obs, checkpoint: str | None, key: jax.Array):
         params, normalizer = load_params_and_normalizer(checkpoint, params, normalizer)
     except FileNotFoundError as e:
         raise FileNotFoundError(f"checkpoint {checkpoint!r}: {e}") from None
+    except CheckpointUnreadable as e:
+        raise CheckpointUnreadable(f"checkpoint {checkpoint!r} is unreadable: {e}") from None
     except ValueError as e:
         sizes = {k: int(v.shape[-1]) for k, v in obs.items()}
         raise ValueError(

@@ -6,9 +6,24 @@ accumulators) and 'manifest' (JSON: leaf names, shapes, dtypes of every item). E
 as a flat dict {'leaf_0000': array, ...} in jax.tree_util flatten order; the manifest names the
 leaves (`jax.tree_util.keystr`), so any pytree (flax structs, optax states, MJX data) round-trips
 and a mismatch error names the leaf. Orbax writes into a temporary folder and renames it when done.
+
+Damage. Orbax reads only the byte ranges a restore needs and checks nothing else, so a truncated
+or missing file can go unnoticed or surface as a TensorStore error deep in a traceback. Each
+checkpoint therefore also holds INTEGRITY_FILE: the size and SHA-256 of every file in it, written
+(atomically) after orbax finished. A checkpoint whose files do not match it, or that orbax cannot
+read, is *unreadable* (:class:`CheckpointUnreadable`, one line naming the path and the cause);
+one whose leaves differ from the model *does not fit* (:class:`CheckpointMismatch`, a
+ValueError). ``Checkpointer.restore`` falls back to the newest checkpoint that reads; checkpoints
+written before the record existed are checked by reading them only.
 """
 
+import contextlib
+import gc
+import hashlib
+import json
 import os
+import shutil
+import sys
 from typing import Any
 
 import jax
@@ -89,8 +104,102 @@ def _unflatten(target: Any, flat: dict, saved_manifest: list | None = None) -> A
     return jax.tree.unflatten(treedef, leaves)
 
 
+INTEGRITY_FILE = "foottof_files.json"  # in each checkpoint's step folder: sizes and SHA-256
+
+
+class CheckpointUnreadable(RuntimeError):
+    """A checkpoint that cannot be read completely (damaged, partial copy, missing files); the
+    message is one line naming the path and the cause."""
+
+
+class CheckpointMismatch(ValueError):
+    """A readable checkpoint whose leaves do not fit the model (names the leaf and shapes)."""
+
+
+def _file_digests(step_dir: str) -> dict[str, list]:
+    out = {}
+    for root, _, files in os.walk(step_dir):
+        for f in sorted(files):
+            path = os.path.join(root, f)
+            rel = os.path.relpath(path, step_dir)
+            if rel in (INTEGRITY_FILE, INTEGRITY_FILE + ".tmp"):
+                continue
+            with open(path, "rb") as fh:
+                out[rel] = [os.path.getsize(path), hashlib.sha256(fh.read()).hexdigest()]
+    return out
+
+
+def write_integrity(step_dir: str) -> None:
+    """Records the size and SHA-256 of every file of a finished checkpoint (atomic write)."""
+    files = _file_digests(step_dir)
+    tmp = os.path.join(step_dir, INTEGRITY_FILE + ".tmp")
+    with open(tmp, "w") as f:
+        json.dump({"version": 1, "files": files}, f, indent=0)
+    os.replace(tmp, os.path.join(step_dir, INTEGRITY_FILE))
+
+
+def integrity_problem(step_dir: str) -> str | None:
+    """Why the files of checkpoint folder ``step_dir`` do not match its integrity record (None:
+    they match, or the checkpoint predates the record)."""
+    record = os.path.join(step_dir, INTEGRITY_FILE)
+    if not os.path.isdir(step_dir):
+        return "the checkpoint folder is missing"
+    if not os.path.exists(record):
+        return None
+    try:
+        with open(record) as f:
+            expected = json.load(f)["files"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        return f"its file list {INTEGRITY_FILE} is garbled ({type(e).__name__})"
+    for rel, (size, digest) in sorted(expected.items()):
+        path = os.path.join(step_dir, rel)
+        if not os.path.isfile(path):
+            return f"file {rel} is missing"
+        actual = os.path.getsize(path)
+        if actual != size:
+            return f"file {rel} has {actual} bytes, {size} were written (truncated or partial copy)"
+        with open(path, "rb") as fh:
+            if hashlib.sha256(fh.read()).hexdigest() != digest:
+                return f"file {rel} differs from what was written (corrupted)"
+    return None
+
+
+@contextlib.contextmanager
+def _quiet_failed_reads():
+    """Orbax reads array chunks concurrently: when one read fails, the others' failures end up
+    as 'Exception ignored in <coroutine ...>' tracebacks on stderr when collected. The first
+    failure is reported (as one line) by the caller; these are dropped."""
+    previous = sys.unraisablehook
+
+    def hook(unraisable):
+        if "orbax" not in getattr(unraisable.object, "__qualname__", "") and not str(
+            getattr(unraisable.object, "cr_code", "")
+        ).count("orbax"):
+            previous(unraisable)
+
+    sys.unraisablehook = hook
+    try:
+        yield
+    finally:
+        gc.collect()
+        sys.unraisablehook = previous
+
+
+DAMAGED_SUBDIR = "checkpoints_damaged"  # unreadable checkpoints a resume skipped go here
+
+
+def _one_line(e: BaseException) -> str:
+    """The root cause's first line (orbax wraps TensorStore's error, e.g. 'OUT_OF_RANGE: Error
+    reading ... Requested byte range [..) is not valid for value of size 10', in dozens)."""
+    while e.__cause__ is not None or (e.__context__ is not None and not e.__suppress_context__):
+        e = e.__cause__ or e.__context__
+    text = str(e).strip().splitlines()
+    line = text[0].split(" See full TensorStore details")[0] if text else ""
+    return f"{type(e).__name__}: {line[:240]}" if line else type(e).__name__
+
+
 def check_compatible(item: str, saved_manifest: list, target: Any, source: str) -> None:
-    """Raises ValueError naming the first leaf whose name or shape differs from `target`
+    """Raises CheckpointMismatch naming the first leaf whose name or shape differs from `target`
     (a per-step env metric the checkpoint lacks is no mismatch: RECOMPUTED_LEAF_PREFIX)."""
     _, expected = _flatten(jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), target))
     saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
@@ -98,15 +207,15 @@ def check_compatible(item: str, saved_manifest: list, target: Any, source: str) 
         if name not in saved and name.startswith(RECOMPUTED_LEAF_PREFIX):
             continue
         if name not in saved:
-            raise ValueError(f"{source}: {item} leaf {name} is missing in the checkpoint")
+            raise CheckpointMismatch(f"{source}: {item} leaf {name} is missing in the checkpoint")
         if saved[name] != tuple(shape):
-            raise ValueError(
+            raise CheckpointMismatch(
                 f"{source}: {item} leaf {name} has shape {saved[name]} in the checkpoint but "
                 f"{tuple(shape)} in this model"
             )
     extra = sorted(set(saved) - {name for name, _, _ in expected})
     if extra:
-        raise ValueError(
+        raise CheckpointMismatch(
             f"{source}: {item} leaf {extra[0]} is in the checkpoint but not in this model"
         )
 
@@ -137,6 +246,7 @@ class Checkpointer:
         args["manifest"] = ocp.args.JsonSave(manifest)
         self._manager.save(step, args=ocp.args.Composite(**args), force=True)
         self._manager.wait_until_finished()
+        write_integrity(os.path.join(self.directory, str(step)))
         return step
 
     def latest_step(self) -> int | None:
@@ -151,21 +261,75 @@ class Checkpointer:
         ).manifest
 
     def restore(self, target: TrainState, step: int | None = None) -> tuple[TrainState, bool]:
-        """Restores checkpoint `step` (default latest) into the structure/shardings of `target`.
+        """Restores checkpoint `step` (default: the newest that reads completely) into the
+        structure/shardings of `target`.
+
+        Without `step`, each newer checkpoint that is unreadable is skipped with a one-line
+        warning naming it and the cause.
 
         Returns:
           (state, restored_rollout): fields of items missing in the checkpoint ('rollout' when
           saved with save_env_state=False) keep `target`'s values.
+
+        Raises:
+          FileNotFoundError: no checkpoint at all.
+          CheckpointUnreadable: `step` (or, without it, every checkpoint) cannot be read.
+          CheckpointMismatch: a readable checkpoint does not fit `target`.
         """
-        step = self.latest_step() if step is None else step
-        if step is None:
+        steps = sorted(self.all_steps(), reverse=True) if step is None else [step]
+        if not steps:
             raise FileNotFoundError(f"no checkpoint in {self.directory}")
-        manifest = self.manifest(step)
+        problems = []
+        for s in steps:
+            try:
+                restored = self._restore_step(target, s)
+            except CheckpointUnreadable as e:
+                problems.append(f"{s}: {e}")
+                if step is None:
+                    print(f"[checkpoint] WARNING: skipping checkpoint {e}")
+                continue
+            if problems and step is None:
+                self._move_aside([int(p.split(":", 1)[0]) for p in problems])
+            return restored
+        if step is not None:
+            raise CheckpointUnreadable(problems[0].split(": ", 1)[1])
+        raise CheckpointUnreadable(
+            f"no readable checkpoint in {os.path.dirname(self.directory)} (tried "
+            f"{', '.join(str(s) for s in steps)}; newest: {problems[0].split(': ', 1)[1]})"
+        )
+
+    def _move_aside(self, steps: list[int]) -> None:
+        """Moves skipped (unreadable) checkpoints out of the way of the run's next saves, into
+        <run_dir>/checkpoints_damaged/<step> (kept, not deleted), one line each."""
+        dest_root = os.path.join(os.path.dirname(self.directory), DAMAGED_SUBDIR)
+        os.makedirs(dest_root, exist_ok=True)
+        for s in steps:
+            dest = os.path.join(dest_root, str(s))
+            n = 1
+            while os.path.exists(dest):
+                dest, n = os.path.join(dest_root, f"{s}.{n}"), n + 1
+            shutil.move(os.path.join(self.directory, str(s)), dest)
+            print(f"[checkpoint] moved unreadable checkpoint {s} to {dest}")
+        self._manager.reload()
+
+    def _restore_step(self, target: TrainState, step: int) -> tuple[TrainState, bool]:
+        path = os.path.join(self.directory, str(step))
+        problem = integrity_problem(path)
+        if problem:
+            raise CheckpointUnreadable(f"{path}: {problem}")
+        try:
+            manifest = self.manifest(step)
+        except Exception as e:  # orbax/JSON errors of a damaged manifest
+            raise CheckpointUnreadable(f"{path}: manifest unreadable ({_one_line(e)})") from None
         items = [i for i in ITEMS if i in manifest]
         for item in items:
             check_compatible(item, manifest[item], _sub(target, item), f"checkpoint {step}")
         args = {i: ocp.args.StandardRestore(_abstract(_sub(target, i), manifest[i])) for i in items}
-        restored = self._manager.restore(step, args=ocp.args.Composite(**args))
+        try:
+            with _quiet_failed_reads():
+                restored = self._manager.restore(step, args=ocp.args.Composite(**args))
+        except Exception as e:  # TensorStore/orbax errors of damaged data
+            raise CheckpointUnreadable(f"{path}: data unreadable ({_one_line(e)})") from None
         fields = {}
         for item in items:
             fields.update(_unflatten(_sub(target, item), restored[item], manifest[item]))
@@ -232,8 +396,9 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
       params, normalizer: the current model's (initialized) values; give structure and sharding.
 
     Raises:
-      FileNotFoundError if there is no checkpoint there; ValueError naming the leaf and both
-      shapes if the saved network does not fit this model.
+      FileNotFoundError if there is no checkpoint there; CheckpointUnreadable (one line: path
+      and cause) if it cannot be read completely; CheckpointMismatch (a ValueError naming the
+      leaf and both shapes) if the saved network does not fit this model.
     """
     path = os.path.abspath(path)
     step = None
@@ -250,14 +415,23 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
         step = manager.latest_step() if step is None else step
         if step is None or step not in manager.all_steps():
             raise FileNotFoundError(f"init_from: no checkpoint found in {directory}")
-        manifest = manager.restore(
-            step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
-        ).manifest
+        step_dir = os.path.join(directory, str(step))
+        problem = integrity_problem(step_dir)
+        if problem:
+            raise CheckpointUnreadable(f"{step_dir}: {problem}")
+        try:
+            manifest = manager.restore(
+                step, args=ocp.args.Composite(manifest=ocp.args.JsonRestore())
+            ).manifest
+        except Exception as e:
+            raise CheckpointUnreadable(
+                f"{step_dir}: manifest unreadable ({_one_line(e)})"
+            ) from None
         target = {"params": {"params": params}, "normalizer": {"normalizer": normalizer}}
         grown, saved_like = {}, {}
         for item, sub in target.items():
             if item not in manifest:
-                raise ValueError(f"init_from {directory}/{step}: checkpoint has no {item!r}")
+                raise CheckpointUnreadable(f"{step_dir}: the checkpoint has no {item!r} item")
             grown[item] = _grown_leaves(manifest[item], sub)
             saved_like[item] = jax.tree_util.tree_map_with_path(
                 lambda p, x, g=grown[item]: (
@@ -271,7 +445,11 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
                 item, manifest[item], saved_like[item], f"init_from {directory}/{step}"
             )
         args = {item: ocp.args.StandardRestore(_abstract(sub)) for item, sub in saved_like.items()}
-        restored = manager.restore(step, args=ocp.args.Composite(**args))
+        try:
+            with _quiet_failed_reads():
+                restored = manager.restore(step, args=ocp.args.Composite(**args))
+        except Exception as e:
+            raise CheckpointUnreadable(f"{step_dir}: data unreadable ({_one_line(e)})") from None
     finally:
         manager.close()
     out = []

@@ -296,15 +296,26 @@ def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.
     init_s = time.time() - t_init
     checkpointer = ckpt.Checkpointer(run_dir, int(t.max_checkpoints), bool(t.checkpoint_env_state))
     if resume:
-        state, restored_rollout = checkpointer.restore(state)
+        try:
+            state, restored_rollout = checkpointer.restore(state)
+        except BaseException:
+            checkpointer.close()  # an open manager leaves orbax's event loop to fail at exit
+            raise
         if not restored_rollout:
             fresh = trainer.init(jax.random.fold_in(state.key, state.iteration))
             state = state.replace(**{f: getattr(fresh, f) for f in ckpt.ITEMS["rollout"]})
         print(f"[runner] resumed from iteration {int(state.iteration)} in {checkpointer.directory}")
     elif init_from:
-        params, normalizer = ckpt.load_params_and_normalizer(
-            init_from, state.params, state.normalizer
-        )
+        try:
+            params, normalizer = ckpt.load_params_and_normalizer(
+                init_from, state.params, state.normalizer
+            )
+        except ckpt.CheckpointUnreadable as e:
+            checkpointer.close()
+            raise ckpt.CheckpointUnreadable(f"train.init_from {init_from!r}: {e}") from None
+        except BaseException:
+            checkpointer.close()
+            raise
         state = state.replace(params=params, normalizer=normalizer)
         print(f"[runner] params and normalizer initialized from {init_from}")
     wall_before_s = trim_metrics(run_dir, int(state.iteration)) if (resume and main) else 0.0

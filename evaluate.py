@@ -6,7 +6,7 @@
   python evaluate.py --source all --perturbation joint_offset     # every source
   python evaluate.py --source all --perturbation all              # the whole robustness figure
   python evaluate.py --analyze --source tof --out DIR             # one episode: PNG, MP4, .npz
-  python evaluate.py --export PATH [--checkpoint PATH]            # NumPy policy (.npz)
+  python evaluate.py --export PATH.npz|PATH.onnx [--checkpoint PATH]  # NumPy or ONNX actor
 
 Without --checkpoint: policies/latest if present, else the newest run under runs/.
 """
@@ -35,7 +35,11 @@ _OUT = flags.DEFINE_string("out", None, "Output directory (default c.eval.out_di
 _ANALYZE = flags.DEFINE_bool("analyze", False, "Rollout analysis of one episode instead.")
 _VIDEO = flags.DEFINE_enum("video", "mp4", ["mp4", "gif", "none"], "--analyze: rollout video.")
 _VIDEO_STRIDE = flags.DEFINE_integer("video_stride", 2, "--analyze: render every k-th step.")
-_EXPORT = flags.DEFINE_string("export", None, "Write the NumPy policy (.npz) to this path.")
+_EXPORT = flags.DEFINE_string(
+    "export",
+    None,
+    "Write the actor to this path: .npz (NumPy) or .onnx (ONNX, explicit LSTM state).",
+)
 _UNTRAINED = flags.DEFINE_bool(
     "untrained", False, "Use a freshly initialized policy (pipeline checks only)."
 )
@@ -81,13 +85,44 @@ def _analyze(cfg, plan, ckpt, key, out: str) -> None:
     )
 
 
-def _export(cfg, source: str, ckpt, key) -> None:
-    """The policy's actor as a NumPy .npz (foottof.ppo.export)."""
-    from foottof.eval.harness import make_eval_env_and_policy
-    from foottof.ppo.export import export_policy
+EXPORT_FORMATS = (".npz", ".onnx")
 
-    _, nets, params, norm = make_eval_env_and_policy(cfg, source, ckpt, key, key)
-    print(f"[evaluate] wrote {export_policy(_EXPORT.value, nets, params, norm)}")
+
+def _check_export_path(path: str) -> None:
+    """ValueError naming the bad path: an unknown suffix or a folder that does not exist."""
+    suffix = os.path.splitext(path)[1].lower()
+    if suffix not in EXPORT_FORMATS:
+        raise ValueError(
+            f"--export {path!r}: unknown suffix {suffix or '(none)'!r}; valid: "
+            f"{', '.join(EXPORT_FORMATS)} (the suffix picks the format)"
+        )
+    folder = os.path.dirname(os.path.abspath(path))
+    if not os.path.isdir(folder):
+        raise ValueError(f"--export {path!r}: folder {folder!r} does not exist")
+    if os.path.isdir(path):
+        raise ValueError(f"--export {path!r} is a folder; give a file name ending in {suffix}")
+
+
+def _export(cfg, source: str, ckpt, key) -> None:
+    """The policy's actor as a NumPy .npz (foottof.ppo.export) or ONNX model (export_onnx)."""
+    from foottof.eval.harness import make_eval_env_and_policy
+
+    env, nets, params, norm = make_eval_env_and_policy(cfg, source, ckpt, key, key)
+    if _EXPORT.value.lower().endswith(".onnx"):
+        try:
+            from foottof.ppo import export_onnx
+        except ImportError as e:
+            raise RuntimeError(
+                f"--export {_EXPORT.value!r}: ONNX export needs the 'export' extra "
+                f"(pip install -e '.[export]'): {e}"
+            ) from None
+        meta = export_onnx.deployment_metadata(cfg, env, ckpt)
+        path = export_onnx.export_onnx(_EXPORT.value, nets, params, norm, meta)
+    else:
+        from foottof.ppo.export import export_policy
+
+        path = export_policy(_EXPORT.value, nets, params, norm)
+    print(f"[evaluate] wrote {path}")
 
 
 def main(argv):
@@ -119,6 +154,8 @@ def main(argv):
             cfg.eval.episodes = _EPISODES.value
         if _ANALYZE.value:  # flags checked before any policy is looked for or env built
             _check_analyze(sources, plan)
+        if _EXPORT.value:
+            _check_export_path(_EXPORT.value)
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
         cfg = with_run_network(cfg, ckpt)
         acts = "mean actions" if cfg.eval.deterministic else "actions sampled at the action std"

@@ -68,6 +68,28 @@ def foot_stuck(foot_pos: jax.Array, height_at, depth_m: float) -> jax.Array:
     return (foot_pos[:, 2] < top - depth_m) & (top - bottom > STUCK_GAP_SPAN_M)
 
 
+def actor_obs_layout(num_sensors: int, num_zones: int) -> list[tuple[str, int, int, str]]:
+    """(name, start, stop, what) of each block of the actor observation ``obs['state']``, in
+    order (see AnymalToFEnv._observe); stop of the last block = the observation size."""
+    blocks = [
+        ("tof_distance", num_sensors * num_zones, "zone distances, sensor-major [m]"),
+        ("tof_valid", num_sensors * num_zones, "zone validity {0, 1}"),
+        ("tof_age", num_sensors, "age of each sensor's frame [s]"),
+        ("joint_pos", 12, "joint positions minus the default pose [rad] (JOINT_NAMES order)"),
+        ("joint_vel", 12, "joint velocities x 0.05 [rad/s]"),
+        ("projected_gravity", 3, "gravity unit vector in the base frame"),
+        ("base_lin_vel", 3, "base linear velocity estimate, base frame [m/s]"),
+        ("base_ang_vel", 3, "base angular velocity estimate x 0.25 [rad/s]"),
+        ("goal", 4, "goal distance clipped at 5 m [m], direction in the base frame (2), time left"),
+        ("last_action", 12, "previous action (before scaling)"),
+    ]
+    out, start = [], 0
+    for name, n, what in blocks:
+        out.append((name, start, start + n, what))
+        start += n
+    return out
+
+
 def critic_height_scan(height_at, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
     """(P,) terrain heights relative to the base at :func:`critic_scan_points`, turned with the
     base's heading (yaw only), clipped to +-1 m [m]."""

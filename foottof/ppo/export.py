@@ -23,6 +23,15 @@ def export_policy(path: str, networks, params, normalizer) -> str:
     Returns:
       The path written.
     """
+    arrays, meta = actor_arrays(networks, params, normalizer)
+    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
+    np.savez(path, **arrays)
+    return path if path.endswith(".npz") else path + ".npz"
+
+
+def actor_arrays(networks, params, normalizer) -> tuple[dict, dict]:
+    """(arrays, meta) of the actor: normalizer mean/std, LSTM weights per layer (gates i, f, g,
+    o concatenated: w_x (in, 4H), w_h (H, 4H), b (4H,)), MLP head; float32 NumPy."""
     import jax
 
     module = networks.module
@@ -61,9 +70,7 @@ def export_policy(path: str, networks, params, normalizer) -> str:
         "action_size": int(module.action_size),
         "obs_size": int(arrays["obs_mean"].shape[-1]),
     }
-    arrays["meta"] = np.frombuffer(json.dumps(meta).encode(), np.uint8)
-    np.savez(path, **arrays)
-    return path if path.endswith(".npz") else path + ".npz"
+    return arrays, meta
 
 
 def _sigmoid(x: np.ndarray) -> np.ndarray:

@@ -12,9 +12,17 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install --quiet -e ".[dev,export]"
 	touch $(STAMP)
 
-# Main job on a CPU-sized default: a short training run (configs/cpu.py).
-demo: $(STAMP)
+# Main job on a CPU-sized default: a short training run (configs/cpu.py, ~2 min), then one episode
+# of a shipped policy with plots and a video: policies/latest if present, else policies/flat.
+DEMO_OUT := runs/demo_analysis
+demo: $(STAMP) render-deps
 	$(PY) train.py --config configs/cpu.py
+	@if [ -d policies/latest/checkpoints ]; then \
+	  $(PY) evaluate.py --analyze --source tof --checkpoint policies/latest --out $(DEMO_OUT); \
+	else \
+	  $(PY) evaluate.py --analyze --source tof --checkpoint policies/flat --config configs/flat.py --out $(DEMO_OUT); \
+	fi
+	@echo "[demo] a shipped policy at work: $(DEMO_OUT)/rollout_tof.mp4 (video), $(DEMO_OUT)/analysis_tof.png (plots)"
 
 # Learning check from scratch on flat ground (configs/flat.py): a new run runs/flat-<time>, then its
 # learning curve (success, falls, return, length, level, speed vs env steps) as CSV + PNG.

@@ -28,7 +28,7 @@ demo: $(STAMP) render-deps
 # learning curve (success, falls, return, length, level, speed vs env steps) as CSV + PNG.
 learn: $(STAMP)
 	$(PY) train.py --config configs/flat.py $(LEARN_ARGS)
-	$(PY) -m foottof.ppo.curves runs/flat
+	$(PY) -m foottof.lab.curves runs/flat
 
 # Offline install (e.g. a GPU machine without internet): every wheel the project needs, in wheels/.
 # There: python3.11 -m venv .venv && .venv/bin/pip install --no-index --find-links wheels foottof

@@ -25,7 +25,8 @@ import numpy as np  # noqa: E402
 from mujoco import mjx  # noqa: E402
 
 from foottof import constants  # noqa: E402
-from foottof.robot import control, model  # noqa: E402
+from foottof.physics.mjx_backend import control_step  # noqa: E402
+from foottof.robot import model  # noqa: E402
 from foottof.terrain.heightfield import Heightfield  # noqa: E402
 
 
@@ -71,7 +72,7 @@ def bench(ground: str, args, tuning: dict) -> None:
     def one_env(d, key):
         def body(d, k):
             q_target = target0 + 0.3 * jax.random.normal(k, (constants.NUM_JOINTS,))
-            d, _ = control.control_step(mx, d, q_target, kp, kd)
+            d, _ = control_step(mx, d, q_target, kp, kd)
             return d, None
 
         d, _ = jax.lax.scan(body, d, jax.random.split(key, args.steps))

@@ -5,7 +5,7 @@ Usage:
 
 Terrain: stepping stones and gaps over a pit (8 x 8 m at 4 cm), robots spread over it in the
 nominal stance holding random joint targets. Per control step it times (a) physics: 4 MJX
-substeps with the JAX PD (foottof.robot.control.control_step); (b) ToF sensing:
+substeps with the JAX PD (foottof.physics.mjx_backend.control_step); (b) ToF sensing:
 foottof.sensors.sense for 4 feet x 41 rays from the ``{leg}_tof`` sites, plus the sensor timing
 and degradation step; and reports (b) / ((a) + (b)). Compile time is reported apart.
 """
@@ -26,7 +26,8 @@ from mujoco import mjx  # noqa: E402
 
 from configs import _sensor  # noqa: E402
 from foottof import constants, sensors  # noqa: E402
-from foottof.robot import control, model  # noqa: E402
+from foottof.physics.mjx_backend import control_step  # noqa: E402
+from foottof.robot import model  # noqa: E402
 from foottof.terrain.heightfield import Heightfield  # noqa: E402
 
 
@@ -78,7 +79,7 @@ def bench(n: int, args) -> None:
         def one_env(d, key):
             def body(d, k):
                 q = target0 + 0.3 * jax.random.normal(k, (constants.NUM_JOINTS,))
-                return control.control_step(mx, d, q, 80.0, 2.0)[0], None
+                return control_step(mx, d, q, 80.0, 2.0)[0], None
 
             return jax.lax.scan(body, d, jax.random.split(key, steps))[0]
 

@@ -27,7 +27,7 @@ def get_model_section() -> ml_collections.ConfigDict:
 
 
 def get_control_section() -> ml_collections.ConfigDict:
-    """Keyword arguments of foottof.robot.pd_torque / control_step (same names)."""
+    """Keyword arguments of foottof.robot.pd_torque and the physics backends (same names)."""
     c = ml_collections.ConfigDict()
     c.kp = 150.0  # joint PD stiffness [N m/rad] (80 sags 3 cm, dips 7 cm on landing)
     c.kd = 5.0  # joint PD damping [N m s/rad]

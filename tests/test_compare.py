@@ -1,4 +1,4 @@
-"""foottof.ppo.compare: window means of A/B branches against hand-computed values."""
+"""foottof.lab.compare: window means of A/B branches against hand-computed values."""
 
 import csv
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from foottof.ppo import compare
+from foottof.lab import compare
 
 
 def _write_metrics(run_dir, rows):

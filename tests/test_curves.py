@@ -1,4 +1,4 @@
-"""Tests of the learning-curve writer (foottof.ppo.curves) on hand-made metrics.csv files."""
+"""Tests of the learning-curve writer (foottof.lab.curves) on hand-made metrics.csv files."""
 
 import csv
 import math
@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from foottof.ppo import curves
+from foottof.lab import curves
 
 
 def test_moving_average_hand_computed_skips_nan():

@@ -1,4 +1,4 @@
-"""Curriculum levels per terrain type read from a checkpoint (foottof/ppo/levels.py).
+"""Curriculum levels per terrain type read from a checkpoint (foottof/lab/levels.py).
 
 Oracle: where each env spawned. Tiles are tile_length_m x tile_width_m rectangles laid out with
 map column i at world x in [i L, (i + 1) L) and level j at y in [j W, (j + 1) W), so the spawn
@@ -12,7 +12,7 @@ import os
 import numpy as np
 import pytest
 
-from foottof.ppo import levels
+from foottof.lab import levels
 from foottof.terrain.terrain_map import TERRAIN_TYPES, allocate_columns
 
 RUN = os.path.join(os.path.dirname(__file__), "..", "policies", "stage1")

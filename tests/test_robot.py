@@ -11,9 +11,9 @@ from mujoco import mjx
 
 from configs import _env
 from foottof import constants
+from foottof.physics.mjx_backend import control_step
 from foottof.robot import (
     DEFAULT_TUNING,
-    control_step,
     default_qpos,
     forward_kinematics,
     make_model,

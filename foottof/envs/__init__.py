@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from foottof.envs.anymal_tof import AnymalToFEnv
+from foottof.envs.wrappers import VmapEnv, wrap_brax_env
 
 
 def make_env(cfg, source: str | None = None, **kwargs) -> AnymalToFEnv:
@@ -12,9 +13,7 @@ def make_env(cfg, source: str | None = None, **kwargs) -> AnymalToFEnv:
 
 def make_training_env(cfg, **kwargs):
     """Batched env for the trainer: ``reset(keys (N, 2))``, ``step(state, actions (N, 12))``."""
-    from foottof.ppo.train import VmapEnv  # the one batching adapter (the trainer's contract)
-
     return VmapEnv(make_env(cfg, **kwargs))
 
 
-__all__ = ["AnymalToFEnv", "make_env", "make_training_env"]
+__all__ = ["AnymalToFEnv", "VmapEnv", "make_env", "make_training_env", "wrap_brax_env"]

@@ -24,7 +24,7 @@ import math
 import os
 
 from foottof.eval import results
-from foottof.ppo.compare import parse_branch  # NAME=DIR, as the A/B tool of training runs
+from foottof.lab.compare import parse_branch  # NAME=DIR, as the A/B tool of training runs
 
 PAIRED_KEYS = (  # CSV columns of --out
     "source",

@@ -1,23 +1,31 @@
 """Physics backends between robot/ and envs/: MJX (on device) or MuJoCo C (host callback).
 
-``make_physics(cfg.env, mj_model)`` picks the backend named by ``env.physics`` ("auto": MuJoCo C
-on a CPU JAX backend, MJX otherwise). Both have ``init(qpos) -> PhysicsState`` and
-``step(state, q_target, kp, kd, foot_friction, added_mass_kg) -> (state, taus)`` for one env
-(vmap for many), the same PD law (foottof.robot.pd_torque) and the same per-episode model changes.
+``make_physics(name, mj_model, control_kw, nthread)`` picks the backend named by ``env.physics``
+("auto": MuJoCo C on a CPU JAX backend, MJX otherwise). Both implement :class:`PhysicsBackend`:
+``init(qpos) -> PhysicsState`` and ``step(state, q_target, kp, kd, foot_friction, added_mass_kg)
+-> (state, taus)`` for one env (vmap for many), with the same PD law (foottof.robot.pd_torque)
+between substeps (MJX: ``mjx_backend.control_step``; MuJoCo C: ``mujoco_backend``) and the same
+per-episode model changes.
 """
 
 from __future__ import annotations
 
 import mujoco
 
-from foottof.physics.base import BACKENDS, PhysicsState, num_substeps, resolve_backend
+from foottof.physics.base import (
+    BACKENDS,
+    PhysicsBackend,
+    PhysicsState,
+    num_substeps,
+    resolve_backend,
+)
 from foottof.physics.mjx_backend import MjxPhysics
 from foottof.physics.mujoco_backend import MujocoPhysics
 
 
 def make_physics(
     name: str, m: mujoco.MjModel, control_kw: dict | None = None, nthread: int = 0
-) -> MjxPhysics | MujocoPhysics:
+) -> PhysicsBackend:
     """The physics backend ``name`` (one of BACKENDS) for model ``m``.
 
     Args:
@@ -37,6 +45,7 @@ __all__ = [
     "BACKENDS",
     "MjxPhysics",
     "MujocoPhysics",
+    "PhysicsBackend",
     "PhysicsState",
     "make_physics",
     "num_substeps",

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from typing import Protocol
 
 import jax
 import jax.numpy as jp
@@ -39,6 +40,31 @@ class PhysicsState:
     qvel: jax.Array
     qacc_warmstart: jax.Array
     exact: jax.Array
+
+
+class PhysicsBackend(Protocol):
+    """What the env needs of a physics backend (MjxPhysics, MujocoPhysics): one env per call,
+    vmap for many; both hold the PD law (foottof.robot.pd_torque) between their substeps."""
+
+    name: str  # "mjx" | "mujoco"
+    num_substeps: int  # physics steps per control step
+
+    def init(self, qpos: jax.Array) -> PhysicsState:
+        """Resting state at ``qpos`` (nq,)."""
+        ...
+
+    def step(
+        self,
+        state: PhysicsState,
+        q_target: jax.Array,
+        kp: jax.Array,
+        kd: jax.Array,
+        foot_friction: jax.Array,
+        added_mass_kg: jax.Array,
+    ) -> tuple[PhysicsState, jax.Array]:
+        """One control period holding ``q_target`` (12,) with gains ``kp``, ``kd``, this
+        episode's foot friction and added base mass: (new state, (num_substeps, 12) torques)."""
+        ...
 
 
 def init_state(qpos: jax.Array, nv: int, exact: bool) -> PhysicsState:

@@ -9,7 +9,48 @@ from mujoco import mjx
 
 from foottof import constants
 from foottof.physics.base import PhysicsState, init_state, num_substeps
-from foottof.robot import control
+from foottof.robot.control import pd_torque
+
+
+def control_step(
+    m: mjx.Model,
+    d: mjx.Data,
+    q_target: jax.Array,
+    kp: jax.Array | float,
+    kd: jax.Array | float,
+    num_substeps: int = constants.DECIMATION,
+    torque_limit: float = constants.TORQUE_LIMIT_NM,
+    velocity_limit: float = constants.VELOCITY_LIMIT_RADS,
+    saturation_torque: float | None = 1.5 * constants.TORQUE_LIMIT_NM,
+) -> tuple[mjx.Data, jax.Array]:
+    """Hold ``q_target`` for one control period: (JAX PD, ``mjx.step``) x ``num_substeps``.
+
+    Args:
+      m: MJX model (joint order of foottof.robot.make_model: qpos[7:19], qvel[6:18]).
+      d: MJX data (unbatched; vmap for many envs).
+      q_target: (12,) joint targets [rad], held over the substeps.
+      kp, kd, torque_limit, velocity_limit, saturation_torque: see :func:`pd_torque`.
+      num_substeps: physics steps per control step (static).
+
+    Returns:
+      (new data, (num_substeps, 12) torques applied at each substep [N m]).
+    """
+
+    def substep(d, _):
+        tau = pd_torque(
+            q_target,
+            d.qpos[7:19],
+            d.qvel[6:18],
+            kp,
+            kd,
+            torque_limit,
+            velocity_limit,
+            saturation_torque,
+        )
+        d = mjx.step(m, d.replace(ctrl=tau))
+        return d, tau
+
+    return jax.lax.scan(substep, d, None, length=num_substeps)
 
 
 class MjxPhysics:
@@ -69,8 +110,6 @@ class MjxPhysics:
         """
         mx = self.episode_model(foot_friction, added_mass_kg)
         d = self._d0.replace(qpos=state.qpos, qvel=state.qvel, qacc_warmstart=state.qacc_warmstart)
-        d, taus = control.control_step(
-            mx, d, q_target, kp, kd, self.num_substeps, **self.control_kw
-        )
+        d, taus = control_step(mx, d, q_target, kp, kd, self.num_substeps, **self.control_kw)
         new = state.replace(qpos=d.qpos, qvel=d.qvel, qacc_warmstart=d.qacc_warmstart)
         return new, taus

@@ -4,7 +4,7 @@ import jax
 import jax.numpy as jp
 from brax.envs.base import State
 
-from foottof.ppo.train import VmapEnv
+from foottof.envs.wrappers import VmapEnv
 
 
 class CueMemoryEnv:

@@ -7,7 +7,7 @@ or a dict {'state': actor obs, 'privileged_state': critic obs}, `State.reward` (
 `State.metrics` a dict of (N,) arrays, and an `action_size` attribute.
 Every leaf of the batched State must have the env axis first (it is sharded over devices).
 `wrap_brax_env` makes such an env from any single Brax `Env`; `VmapEnv` from a single env that
-auto-resets itself (our locomotion env).
+auto-resets itself (our locomotion env); both live in foottof.envs.wrappers (re-exported here).
 """
 
 import math
@@ -24,6 +24,7 @@ from flax import struct
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-exported)
 from foottof.ppo import losses
 from foottof.ppo import networks as net
 
@@ -75,35 +76,6 @@ class Train(NamedTuple):
     state_sharding: Any  # TrainState of NamedSharding
     num_envs: int
     steps_per_iteration: int  # env steps per iteration over all envs (num_envs * num_steps)
-
-
-class VmapEnv:
-    """Batched view of a single env that auto-resets itself (reset/step vmapped over envs)."""
-
-    def __init__(self, env):
-        self.env = env
-
-    def reset(self, keys: jax.Array):
-        return jax.vmap(self.env.reset)(keys)
-
-    def step(self, state, actions: jax.Array):
-        return jax.vmap(self.env.step)(state, actions)
-
-    def __getattr__(self, name):
-        return getattr(self.env, name)
-
-
-def wrap_brax_env(env, episode_length: int, action_repeat: int = 1, randomization_fn=None):
-    """Any single Brax `Env` -> the batched, time-limited, auto-resetting env the trainer expects.
-
-    Brax's VmapWrapper + EpisodeWrapper (sets done and info['truncation'] at `episode_length`)
-    + AutoResetWrapper (resets to the env's first state of this env slot).
-    """
-    from brax.envs.wrappers import training as brax_training
-
-    if episode_length < 1:
-        raise ValueError(f"episode_length={episode_length}; must be >= 1")
-    return brax_training.wrap(env, episode_length, action_repeat, randomization_fn)
 
 
 def _validate(ppo: ml_collections.ConfigDict, num_devices: int) -> None:

@@ -1,6 +1,6 @@
 """ANYmal-D robot: MuJoCo model from primitives, analytic kinematics, and the joint PD law."""
 
-from foottof.robot.control import control_step, pd_torque, torque_bounds
+from foottof.robot.control import pd_torque, torque_bounds
 from foottof.robot.kinematics import (
     FootKinematics,
     base_to_world,
@@ -16,7 +16,6 @@ __all__ = [
     "DEFAULT_TUNING",
     "FootKinematics",
     "base_to_world",
-    "control_step",
     "default_qpos",
     "forward_kinematics",
     "make_model",

@@ -1,4 +1,5 @@
-"""Joint PD law with drive torque limits (NumPy or JAX), and the MJX control step (PD + substeps).
+"""Joint PD law with drive torque limits (NumPy or JAX); the substep loops that apply it live in
+foottof.physics (MJX: ``mjx_backend.control_step``; MuJoCo C: ``mujoco_backend``).
 
 The PD law is written once for both physics backends: :func:`pd_torque` runs on NumPy arrays (the
 MuJoCo C backend's host callback, float64) and on JAX arrays (MJX, inside the compiled step).
@@ -9,7 +10,6 @@ from __future__ import annotations
 import jax
 import jax.numpy as jp
 import numpy as np
-from mujoco import mjx
 
 from foottof import constants
 
@@ -74,44 +74,3 @@ def pd_torque(
     tau = kp * (q_target - q) - kd * qd
     lower, upper = torque_bounds(qd, torque_limit, velocity_limit, saturation_torque)
     return _xp(tau, lower, upper).clip(tau, lower, upper)
-
-
-def control_step(
-    m: mjx.Model,
-    d: mjx.Data,
-    q_target: jax.Array,
-    kp: jax.Array | float,
-    kd: jax.Array | float,
-    num_substeps: int = constants.DECIMATION,
-    torque_limit: float = constants.TORQUE_LIMIT_NM,
-    velocity_limit: float = constants.VELOCITY_LIMIT_RADS,
-    saturation_torque: float | None = 1.5 * constants.TORQUE_LIMIT_NM,
-) -> tuple[mjx.Data, jax.Array]:
-    """Hold ``q_target`` for one control period: (JAX PD, ``mjx.step``) x ``num_substeps``.
-
-    Args:
-      m: MJX model (joint order of foottof.robot.make_model: qpos[7:19], qvel[6:18]).
-      d: MJX data (unbatched; vmap for many envs).
-      q_target: (12,) joint targets [rad], held over the substeps.
-      kp, kd, torque_limit, velocity_limit, saturation_torque: see :func:`pd_torque`.
-      num_substeps: physics steps per control step (static).
-
-    Returns:
-      (new data, (num_substeps, 12) torques applied at each substep [N m]).
-    """
-
-    def substep(d, _):
-        tau = pd_torque(
-            q_target,
-            d.qpos[7:19],
-            d.qvel[6:18],
-            kp,
-            kd,
-            torque_limit,
-            velocity_limit,
-            saturation_torque,
-        )
-        d = mjx.step(m, d.replace(ctrl=tau))
-        return d, tau
-
-    return jax.lax.scan(substep, d, None, length=num_substeps)

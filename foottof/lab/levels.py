@@ -1,6 +1,6 @@
 """Where the terrain curriculum stands: curriculum levels per terrain type in a run's checkpoint.
 
-``python -m foottof.ppo.levels RUN_DIR [--step N]`` reads the env state saved with a checkpoint
+``python -m foottof.lab.levels RUN_DIR [--step N]`` reads the env state saved with a checkpoint
 (``train.checkpoint_env_state``, on by default) and prints, per terrain type of the training map,
 how many envs are at each curriculum level. The mean level of the learning curve hides this: a
 run can hold its box tiles at the top while its stepping stones stay at level 0.

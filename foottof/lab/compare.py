@@ -1,6 +1,6 @@
 """A/B comparison of training runs branched from one checkpoint: means over an iteration window.
 
-``python -m foottof.ppo.compare NAME=RUN_DIR ... --first N --last M [--out FILE.csv]`` reads each
+``python -m foottof.lab.compare NAME=RUN_DIR ... --first N --last M [--out FILE.csv]`` reads each
 run's ``metrics.csv`` and prints, per branch, the mean of the per-iteration values of
 ``COLUMNS`` over iterations ``N..M`` (both included; iterations missing from a run are skipped,
 and the table says how many each branch had). A branch resumed from a copy of another run keeps
@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from foottof.ppo.curves import read_metrics
+from foottof.lab.curves import read_metrics
 
 # (metrics.csv column, table header). Per-episode columns are means over the episodes that ended
 # in an iteration; the window mean weighs every iteration alike (iterations with no ended episode

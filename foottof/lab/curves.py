@@ -1,6 +1,6 @@
 """Learning curves of a run: success, return, length, curriculum level and speed vs env steps.
 
-``python -m foottof.ppo.curves RUN_DIR [--window N]`` reads ``RUN_DIR/metrics.csv`` (written by the
+``python -m foottof.lab.curves RUN_DIR [--window N]`` reads ``RUN_DIR/metrics.csv`` (written by the
 runner every iteration, also while the run goes on) and writes ``RUN_DIR/curve.csv`` and
 ``RUN_DIR/curve.png``: each quantity as a moving average over ``window`` iterations.
 """

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jp
@@ -13,6 +15,7 @@ from foottof import constants
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
+from foottof.envs.sensing import select_where
 from foottof.perception import check_source
 from foottof.perception.odometry import noisy_odometry
 from foottof.physics import make_physics
@@ -41,6 +44,96 @@ EPISODE_METRICS = (
     "episode/speed_ms",
 )
 STEP_METRICS = ("task/speed_ms", "task/feet_at_edges")  # averaged over all steps by the trainer
+
+
+@dataclasses.dataclass(frozen=True)
+class TaskSpec:
+    """The task's settings, read once from the config (``TaskSpec.from_config(cfg)``); every
+    phase of the step reads these, not the config."""
+
+    clip_actions: float
+    randomize: bool
+    push_vel_ms: float
+    kp: float
+    kd: float
+    max_joint_speed_rads: float
+    contact_margin_m: float
+    edge_radius_m: float
+    edge_height_m: float
+    clip_reward: float
+    only_positive: bool
+    success_radius_m: float
+    bootstrap_time_limit: bool
+    body_contact_margin_m: float
+    knee_contact_terminates: bool
+    fall_height_above_floor_m: float
+    foot_fall_z_m: float
+    foot_stuck_depth_m: float
+    max_tilt_deg: float
+    down_progress_frac: float
+    up_progress_frac: float
+    no_promotion_on_fall: bool
+    init_level_max: int
+    init_joint_noise_rad: float
+    init_roll_pitch_rad: float
+    spawn_height_offset_m: float
+    clip_observations: float
+    critic_height_scan: bool
+
+    @classmethod
+    def from_config(cls, cfg) -> TaskSpec:
+        e, t = cfg.env, cfg.terrain
+        return cls(
+            clip_actions=float(e.clip_actions),
+            randomize=bool(e.randomization.enabled),
+            push_vel_ms=float(e.randomization.push_vel_ms),
+            kp=float(e.control.kp),
+            kd=float(e.control.kd),
+            max_joint_speed_rads=float(e.max_joint_speed_rads),
+            contact_margin_m=float(e.contact_margin_m),
+            edge_radius_m=float(cfg.reward.edge_radius_m),
+            edge_height_m=float(cfg.reward.edge_height_m),
+            clip_reward=float(e.clip_reward),
+            only_positive=bool(cfg.reward.only_positive),
+            success_radius_m=float(cfg.reward.success_radius_m),
+            bootstrap_time_limit=bool(e.bootstrap_time_limit),
+            body_contact_margin_m=float(e.body_contact_margin_m),
+            knee_contact_terminates=bool(e.knee_contact_terminates),
+            fall_height_above_floor_m=float(e.fall_height_above_floor_m),
+            foot_fall_z_m=float(e.foot_fall_z_m),
+            foot_stuck_depth_m=float(e.get("foot_stuck_depth_m", 0.0)),
+            max_tilt_deg=float(e.max_tilt_deg),
+            down_progress_frac=float(t.down_progress_frac),
+            up_progress_frac=float(t.up_progress_frac),
+            no_promotion_on_fall=bool(t.get("no_promotion_on_fall", False)),
+            init_level_max=int(t.init_level_max),
+            init_joint_noise_rad=float(e.init_joint_noise_rad),
+            init_roll_pitch_rad=float(e.init_roll_pitch_rad),
+            spawn_height_offset_m=float(e.spawn_height_offset_m),
+            clip_observations=float(e.clip_observations),
+            critic_height_scan=bool(e.get("critic_height_scan", False)),
+        )
+
+
+class StepKinematics(NamedTuple):
+    """What the terminations and rewards read of the state after the physics step."""
+
+    fk: kinematics.FootKinematics
+    foot_vel: jax.Array  # (4, 3) world foot-centre velocities [m/s]
+    contact: jax.Array  # (4,) float 1 where a foot is within the contact margin
+    gravity: jax.Array  # (3,) projected gravity (base frame)
+    foot_edge: jax.Array  # (4,) feet touching the terrain at a height step
+
+
+class Ends(NamedTuple):
+    """How the step ended the episode, if it did."""
+
+    failed: jax.Array  # () bool: failure termination (incl. divergence)
+    truncated: jax.Array  # () bool: the deadline, without failure
+    done: jax.Array  # () bool
+    knee_contact: jax.Array  # (4,) float
+    stuck: jax.Array  # () bool: a foot went into a gap (its own reason, part of failed)
+
 
 # Stuck-foot probe: the terrain within this radius of a foot centre (the centre and 8 points on
 # the circle) is what the foot is compared against; one cell (4 cm) and a margin, so that the tops
@@ -161,6 +254,7 @@ class AnymalToFEnv(Env):
         check_source(source, allow_all=False)
         rw.check_scales(cfg.reward.scales)
         self.cfg = cfg
+        self.spec = TaskSpec.from_config(cfg)
         self.source = source
         ecfg = cfg.env
         model_kw = dict(ecfg.model)
@@ -231,132 +325,52 @@ class AnymalToFEnv(Env):
 
     def _reset_first(self, rng: jax.Array, overrides: dict | None) -> State:
         key_lvl, key_col, key_ep = jax.random.split(rng, 3)
-        max_init = min(int(self.cfg.terrain.init_level_max), self.tmap.num_levels - 1)
+        max_init = min(self.spec.init_level_max, self.tmap.num_levels - 1)
         level = jax.random.randint(key_lvl, (), 0, max_init + 1)  # level ~ U{0..init_level_max}
         col = jax.random.randint(key_col, (), 0, self.tmap.num_cols)  # column ~ U{0..C-1}
         return self._reset_episode(key_ep, level, col, overrides)
 
     def step(self, state: State, action: jax.Array) -> State:
-        """One 50 Hz control step (4 physics substeps), rewards, terminations, auto-reset."""
+        """One 50 Hz control step in phases: action and physics, kinematics, terminations,
+        rewards, auto-reset (curriculum update on the finished episode), then sensing and
+        observations of the selected state."""
         task: TaskState = state.info["task"]
-        p = task.params
         rng, key_push, key_reset, key_obs = jax.random.split(task.rng, 4)
-        action = jp.clip(
-            action, -float(self.cfg.env.clip_actions), float(self.cfg.env.clip_actions)
+        d, action, taus, diverged = self._act_and_simulate(
+            state.pipeline_state, task, action, key_push
         )
-        q_target = self._default_q + constants.ACTION_SCALE * action
-        d = state.pipeline_state
-        # Push: add a random horizontal base velocity every push interval.
-        push_now = (task.step == p.push_step) & bool(self.cfg.env.randomization.enabled)
-        push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
-        push = push * float(self.cfg.env.randomization.push_vel_ms) * push_now
-        d = d.replace(qvel=d.qvel.at[0:2].add(push))
-        ccfg = self.cfg.env.control
-        kp = float(ccfg.kp) * p.kp_scale * p.motor_strength
-        kd = float(ccfg.kd) * p.kd_scale * p.motor_strength
-        d, taus = self.physics.step(d, q_target, kp, kd, p.friction, p.added_mass_kg)
-        # A diverged simulation (non-finite or absurd velocities) ends the episode as a failure;
-        # sanitize so that no inf/NaN reaches rewards or observations before the auto-reset.
-        max_speed = float(self.cfg.env.max_joint_speed_rads)
-        diverged = ~(jp.all(jp.isfinite(d.qpos)) & jp.all(jp.isfinite(d.qvel)))
-        diverged = diverged | (jp.max(jp.abs(jp.nan_to_num(d.qvel))) > max_speed)
-        d = d.replace(
-            qpos=jp.nan_to_num(d.qpos),
-            qvel=jp.clip(jp.nan_to_num(d.qvel), -max_speed, max_speed),
-            qacc_warmstart=jp.nan_to_num(d.qacc_warmstart),
-        )
-        taus = jp.nan_to_num(taus)
         step = task.step + 1
-
-        # Kinematics for rewards / terminations (analytic FK on the physics model).
-        qpos, qvel = d.qpos, d.qvel
-        base_pos, base_quat = qpos[0:3], qpos[3:7]
-        fk, foot_vel = self._foot_kinematics(d)
-        foot_pos = fk.foot_pos  # (4, 3)
-        foot_clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
-        contact = foot_clear < self.foot_radius_m + float(self.cfg.env.contact_margin_m)
-        contact = contact.astype(jp.float32)
-        rcfg = self.cfg.reward
-        foot_edge = rw.foot_edges(
-            foot_pos,
-            self.hfield.height_at,
-            self.foot_radius_m,
-            float(self.cfg.env.contact_margin_m),
-            float(rcfg.edge_radius_m),
-            float(rcfg.edge_height_m),
+        kin = self._step_kinematics(d)
+        ends = self._terminations(d, kin, step, diverged)
+        reward, terms, success, dist = self._rewards(
+            d, kin, task, action, taus, ends, step, diverged
         )
-        gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
-        failed, knee_contact, stuck = self._failed(d, gravity, fk)
-        failed = failed | diverged
-        truncated = (step >= self.episode_steps) & ~failed
-        done = failed | truncated
-        dist = jp.linalg.norm(task.goal - base_pos[:2])
-
-        rin = rw.RewardInputs(
-            base_pos=base_pos,
-            base_lin_vel=qvel[0:3],
-            goal_xy=task.goal,
-            projected_gravity=gravity,
-            torques=taus[-1],
-            qvel=qvel[6:18],
-            last_qvel=task.last_qvel,
-            action=action,
-            last_action=task.last_action,
-            foot_vel=foot_vel,
-            foot_contact=contact,
-            q=qpos[7:19],
-            default_q=self._default_q,
-            time_s=step.astype(jp.float32) * self.dt,
-            failed=failed.astype(jp.float32),
-            truncated=truncated.astype(jp.float32),
-            knee_contact=knee_contact,
-            foot_edge=foot_edge,
-        )
-        terms = rw.scaled_terms(
-            rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
-        )
-        clip = float(self.cfg.env.clip_reward)
-        terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
-        valid = 1.0 - diverged.astype(jp.float32)
-        reward = rw.total_reward(terms, bool(self.cfg.reward.only_positive), valid)
-        success = (truncated & (dist < float(self.cfg.reward.success_radius_m))).astype(jp.float32)
-
-        # Continue or auto-reset (curriculum update on the finished episode).
-        cont = task.replace(
-            rng=rng,
-            step=step,
-            last_action=action,
-            last_qvel=qvel[6:18],
-        )
-        new_level, new_col = self._curriculum(key_reset, task, base_pos[:2], success, failed)
-        fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
-        fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
-        sel = lambda a, b: jax.tree_util.tree_map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
-        next_task = sel(fresh_task, cont)
-        next_d = sel(fresh_d, d)
+        next_d, next_task = self._auto_reset(key_reset, d, task, action, step, success, ends, rng)
         # Sensing on the selected pose: one ray cast per step; buffers restart where done.
         key_meas, key_sense = jax.random.split(key_obs)
         meas = self._measure(key_meas, next_d, next_task.params)
+        done = ends.done
         sensor_state, sense = self.sensing.step(state.info["sensor"], key_sense, next_d, meas, done)
         obs = self._observe(next_d, next_task, sense, meas)
+        speed = jp.linalg.norm(d.qvel[0:2])
         metrics = {f"reward/{k}": v for k, v in terms.items()}
         metrics.update(
             {
                 "episode/success": success,
-                "episode/failed": failed.astype(jp.float32),
-                "episode/foot_stuck": stuck.astype(jp.float32),
+                "episode/failed": ends.failed.astype(jp.float32),
+                "episode/foot_stuck": ends.stuck.astype(jp.float32),
                 "episode/goal_dist_m": dist,
-                "episode/progress": self._progress(task, base_pos[:2]),
+                "episode/progress": self._progress(task, d.qpos[0:2]),
                 "curriculum/level": task.level.astype(jp.float32),
-                "episode/speed_ms": jp.linalg.norm(qvel[0:2]),
-                "task/speed_ms": jp.linalg.norm(qvel[0:2]),
-                "task/feet_at_edges": jp.sum(foot_edge),
+                "episode/speed_ms": speed,
+                "task/speed_ms": speed,
+                "task/feet_at_edges": jp.sum(kin.foot_edge),
             }
         )
         info = dict(state.info)
         # The deadline is part of this task (time left is observed, reach pays at the last step):
         # bootstrapping V there would pay the at-goal value again forever (10 / (1 - gamma)).
-        bootstrap = truncated & bool(self.cfg.env.bootstrap_time_limit)
+        bootstrap = ends.truncated & self.spec.bootstrap_time_limit
         info.update(task=next_task, sensor=sensor_state, truncation=bootstrap.astype(jp.float32))
         return State(
             pipeline_state=next_d,
@@ -366,6 +380,107 @@ class AnymalToFEnv(Env):
             metrics=metrics,
             info=info,
         )
+
+    # ----------------------------------------------------------------------------------------
+    # Step phases
+    def _act_and_simulate(self, d, task: TaskState, action, key_push):
+        """Clipped action -> joint targets, the episode's push, the physics step; a diverged
+        simulation (non-finite or absurd velocities) is flagged and sanitized so that no inf/NaN
+        reaches rewards or observations before the auto-reset.
+
+        Returns:
+          (physics state, clipped action, (substeps, 12) torques, diverged).
+        """
+        sp, p = self.spec, task.params
+        action = jp.clip(action, -sp.clip_actions, sp.clip_actions)
+        q_target = self._default_q + constants.ACTION_SCALE * action
+        # Push: add a random horizontal base velocity every push interval.
+        push_now = (task.step == p.push_step) & sp.randomize
+        push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
+        push = push * sp.push_vel_ms * push_now
+        d = d.replace(qvel=d.qvel.at[0:2].add(push))
+        kp = sp.kp * p.kp_scale * p.motor_strength
+        kd = sp.kd * p.kd_scale * p.motor_strength
+        d, taus = self.physics.step(d, q_target, kp, kd, p.friction, p.added_mass_kg)
+        max_speed = sp.max_joint_speed_rads
+        diverged = ~(jp.all(jp.isfinite(d.qpos)) & jp.all(jp.isfinite(d.qvel)))
+        diverged = diverged | (jp.max(jp.abs(jp.nan_to_num(d.qvel))) > max_speed)
+        d = d.replace(
+            qpos=jp.nan_to_num(d.qpos),
+            qvel=jp.clip(jp.nan_to_num(d.qvel), -max_speed, max_speed),
+            qacc_warmstart=jp.nan_to_num(d.qacc_warmstart),
+        )
+        return d, action, jp.nan_to_num(taus), diverged
+
+    def _step_kinematics(self, d) -> StepKinematics:
+        """Foot kinematics (analytic FK on the physics model), contacts, gravity, foot edges."""
+        fk, foot_vel = self._foot_kinematics(d)
+        return StepKinematics(
+            fk=fk,
+            foot_vel=foot_vel,
+            contact=self._contact(fk.foot_pos),
+            gravity=_projected_gravity(d.qpos[3:7]),
+            foot_edge=rw.foot_edges(
+                fk.foot_pos,
+                self.hfield.height_at,
+                self.foot_radius_m,
+                self.spec.contact_margin_m,
+                self.spec.edge_radius_m,
+                self.spec.edge_height_m,
+            ),
+        )
+
+    def _terminations(self, d, kin: StepKinematics, step, diverged) -> Ends:
+        failed, knee_contact, stuck = self._failed(d, kin.gravity, kin.fk)
+        failed = failed | diverged
+        truncated = (step >= self.episode_steps) & ~failed
+        return Ends(failed, truncated, failed | truncated, knee_contact, stuck)
+
+    def _rewards(
+        self, d, kin: StepKinematics, task: TaskState, action, taus, ends: Ends, step, diverged
+    ):
+        """(reward, clipped scaled terms, success (float), distance to the goal [m])."""
+        qpos, qvel = d.qpos, d.qvel
+        base_pos = qpos[0:3]
+        rin = rw.RewardInputs(
+            base_pos=base_pos,
+            base_lin_vel=qvel[0:3],
+            goal_xy=task.goal,
+            projected_gravity=kin.gravity,
+            torques=taus[-1],
+            qvel=qvel[6:18],
+            last_qvel=task.last_qvel,
+            action=action,
+            last_action=task.last_action,
+            foot_vel=kin.foot_vel,
+            foot_contact=kin.contact,
+            q=qpos[7:19],
+            default_q=self._default_q,
+            time_s=step.astype(jp.float32) * self.dt,
+            failed=ends.failed.astype(jp.float32),
+            truncated=ends.truncated.astype(jp.float32),
+            knee_contact=ends.knee_contact,
+            foot_edge=kin.foot_edge,
+        )
+        terms = rw.scaled_terms(
+            rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
+        )
+        clip = self.spec.clip_reward
+        terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
+        valid = 1.0 - diverged.astype(jp.float32)
+        reward = rw.total_reward(terms, self.spec.only_positive, valid)
+        dist = jp.linalg.norm(task.goal - base_pos[:2])
+        success = (ends.truncated & (dist < self.spec.success_radius_m)).astype(jp.float32)
+        return reward, terms, success, dist
+
+    def _auto_reset(self, key_reset, d, task: TaskState, action, step, success, ends: Ends, rng):
+        """The next physics and task state: the continued episode, or where it ended, a fresh one
+        on the tile the curriculum picks (keeping the env's evaluation perturbation)."""
+        cont = task.replace(rng=rng, step=step, last_action=action, last_qvel=d.qvel[6:18])
+        new_level, new_col = self._curriculum(key_reset, task, d.qpos[0:2], success, ends.failed)
+        fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
+        fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
+        return select_where(ends.done, fresh_d, d), select_where(ends.done, fresh_task, cont)
 
     # ----------------------------------------------------------------------------------------
     # Internals
@@ -387,7 +502,7 @@ class AnymalToFEnv(Env):
         """Failure (base touches the terrain, falls into a gap, a foot stuck in a gap, bad
         orientation; knee contact too if ``env.knee_contact_terminates``), (4,) knee contacts
         (1.0 where a knee touches) and whether a foot is stuck (``foot_stuck``, its own reason)."""
-        ecfg = self.cfg.env
+        sp = self.spec
         base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
         centres = kinematics.base_to_world(
             jp.asarray(BASE_SPHERE_CENTRES_M, jp.float32), base_pos, base_quat
@@ -395,19 +510,23 @@ class AnymalToFEnv(Env):
         base_clear = centres[:, 2] - self.hfield.height_at(centres[:, :2]) - BASE_SPHERE_RADIUS_M
         knees = fk.knee_pos
         knee_clear = knees[:, 2] - self.hfield.height_at(knees[:, :2]) - KNEE_SPHERE_RADIUS_M
-        knee_contact = knee_clear < float(ecfg.body_contact_margin_m)
-        body_contact = jp.min(base_clear) < float(ecfg.body_contact_margin_m)
-        if bool(ecfg.knee_contact_terminates):
+        knee_contact = knee_clear < sp.body_contact_margin_m
+        body_contact = jp.min(base_clear) < sp.body_contact_margin_m
+        if sp.knee_contact_terminates:
             body_contact = body_contact | jp.any(knee_contact)
-        fell = base_pos[2] < self.hfield.z_floor_m + float(ecfg.fall_height_above_floor_m)
-        fell = fell | (jp.min(fk.foot_pos[:, 2]) < float(ecfg.foot_fall_z_m))
-        stuck_depth = float(ecfg.get("foot_stuck_depth_m", 0.0))
+        fell = base_pos[2] < self.hfield.z_floor_m + sp.fall_height_above_floor_m
+        fell = fell | (jp.min(fk.foot_pos[:, 2]) < sp.foot_fall_z_m)
         stuck = jp.zeros((), bool)
-        if stuck_depth > 0:
-            stuck = jp.any(foot_stuck(fk.foot_pos, self.hfield.height_at, stuck_depth))
-        flipped = gravity[2] > -math.cos(math.radians(float(ecfg.max_tilt_deg)))
+        if sp.foot_stuck_depth_m > 0:
+            stuck = jp.any(foot_stuck(fk.foot_pos, self.hfield.height_at, sp.foot_stuck_depth_m))
+        flipped = gravity[2] > -math.cos(math.radians(sp.max_tilt_deg))
         failed = body_contact | fell | stuck | flipped
         return failed, knee_contact.astype(jp.float32), stuck
+
+    def _contact(self, foot_pos: jax.Array) -> jax.Array:
+        """(4,) float32: 1 where a foot centre is within radius + contact margin of the terrain."""
+        clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
+        return (clear < self.foot_radius_m + self.spec.contact_margin_m).astype(jp.float32)
 
     def _progress(self, task: TaskState, base_xy) -> jax.Array:
         return curriculum.progress_fraction(task.spawn[:2], task.goal, base_xy)
@@ -420,9 +539,9 @@ class AnymalToFEnv(Env):
             reached_goal=success > 0,
             progress=self._progress(task, base_xy),
             num_levels=self.tmap.num_levels,
-            down_progress_frac=float(self.cfg.terrain.down_progress_frac),
-            up_progress_frac=float(self.cfg.terrain.up_progress_frac),
-            failed=failed if bool(self.cfg.terrain.get("no_promotion_on_fall", False)) else None,
+            down_progress_frac=self.spec.down_progress_frac,
+            up_progress_frac=self.spec.up_progress_frac,
+            failed=failed if self.spec.no_promotion_on_fall else None,
         )
         return level, task.col
 
@@ -455,13 +574,11 @@ class AnymalToFEnv(Env):
         params = sample_episode_params(key_par, self.cfg.env.randomization, self._push_interval)
         # Initial pose: nominal stance, joint noise ~ U(+-init_joint_noise_rad) (wider in stage 2).
         kq, kr = jax.random.split(key_pose)
-        jn = float(self.cfg.env.init_joint_noise_rad)
+        jn = self.spec.init_joint_noise_rad
         q0 = self._default_q + jax.random.uniform(kq, (12,), minval=-jn, maxval=jn)
-        rp = jax.random.uniform(kr, (2,), minval=-1.0, maxval=1.0) * float(
-            self.cfg.env.init_roll_pitch_rad
-        )
+        rp = jax.random.uniform(kr, (2,), minval=-1.0, maxval=1.0) * self.spec.init_roll_pitch_rad
         quat = kinematics.euler_to_quat(rp[0], rp[1], spawn[2])
-        z = spawn[3] + self._stand_height + float(self.cfg.env.spawn_height_offset_m)
+        z = spawn[3] + self._stand_height + self.spec.spawn_height_offset_m
         qpos = jp.concatenate([jp.array([spawn[0], spawn[1]]), z[None], quat, q0])
         d = self.physics.init(qpos)  # at rest
         task = TaskState(
@@ -507,7 +624,7 @@ class AnymalToFEnv(Env):
         base_quat = qpos[3:7]
         qd = qvel[6:18]
         qd_meas = qd + p.joint_vel_noise_rads * jax.random.normal(task.rng, (12,))
-        gravity = kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
+        gravity = _projected_gravity(base_quat)
         lin_b = kinematics.quat_rotate_inv(base_quat, qvel[0:3])
         to_goal_w = jp.concatenate([task.goal - qpos[0:2], jp.zeros(1)])
         to_goal_b = kinematics.quat_rotate_inv(base_quat, to_goal_w)[:2]
@@ -540,9 +657,7 @@ class AnymalToFEnv(Env):
         )
         pts = fk.foot_pos[:, None, :2] + offs[None]  # (4, 9, 2)
         heights = self.hfield.height_at(pts) - fk.foot_pos[:, None, 2]  # rel. to foot centre
-        clear = fk.foot_pos[:, 2] - self.hfield.height_at(fk.foot_pos[:, :2])
-        margin = self.foot_radius_m + float(self.cfg.env.contact_margin_m)
-        contact = (clear < margin).astype(jp.float32)
+        contact = self._contact(fk.foot_pos)
         parts = [
             clean,
             jp.clip(heights.reshape(-1), -1.0, 1.0),  # 4 feet x 9 heights [m]
@@ -550,14 +665,19 @@ class AnymalToFEnv(Env):
             p.friction[None],  # 1
             p.added_mass_kg[None] * 0.1,  # 1
         ]
-        if bool(self.cfg.env.get("critic_height_scan", False)):
+        if self.spec.critic_height_scan:
             parts.append(critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat))  # 171
         priv = jp.concatenate(parts)
-        lim = float(self.cfg.env.clip_observations)
+        lim = self.spec.clip_observations
         return {
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),
             "privileged_state": jp.clip(jp.nan_to_num(priv), -lim, lim),
         }
+
+
+def _projected_gravity(base_quat: jax.Array) -> jax.Array:
+    """(3,) the gravity direction in the base frame (unit; (0, 0, -1) when level)."""
+    return kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
 
 
 def _keep_perturbation(fresh: EpisodeParams, old: EpisodeParams) -> EpisodeParams:

@@ -168,7 +168,13 @@ class Sensing:
         reading = self._source_reading(d, meas, emap, true)
         t_step, o_step = timing.step(self.timing, self.model, state.tof, reading, key_step)
         t_reset, o_reset = timing.reset(self.timing, self.bounds, self.model, key_reset, reading)
-        sel = lambda a, b: jax.tree.map(lambda x, y: jp.where(done, x, y), a, b)  # noqa: E731
-        return SensingState(tof=sel(t_reset, t_step), emap=_without_scan(emap)), self._sense(
-            sel(o_reset, o_step), true
+        tof = select_where(done, t_reset, t_step)
+        return SensingState(tof=tof, emap=_without_scan(emap)), self._sense(
+            select_where(done, o_reset, o_step), true
         )
+
+
+def select_where(done: jax.Array, fresh, cont):
+    """Per-leaf ``where(done, fresh, cont)``: the auto-reset's one state selection (the env and
+    its sensing both use it)."""
+    return jax.tree.map(lambda x, y: jp.where(done, x, y), fresh, cont)

@@ -6,24 +6,21 @@ import os
 
 import ml_collections
 
+from foottof.constants import CONTROL_DT_S  # noqa: F401 (imports no JAX)
+from foottof.limits import (  # the one home of allowed values (imports no JAX)
+    ACTIVATIONS,
+    LEVEL_RANGES,
+    LR_SCHEDULES,
+    MAX_CELL_M,
+    MAX_TIMESTEP_S,
+    PHYSICS_BACKENDS,
+    POLICIES,
+    TILT_LIMIT_DEG,
+    TOF_MAX_RATE_HZ,
+)
 from foottof.perception import SOURCES  # imports no JAX
 
 SECTIONS = ("terrain", "sensor", "noise", "env", "reward", "ppo", "network", "train", "eval")
-# Copies of names defined in modules that import JAX (tests/test_config_check.py keeps them equal).
-PHYSICS_BACKENDS = ("auto", "mjx", "mujoco")  # foottof.physics.BACKENDS
-LR_SCHEDULES = ("adaptive", "fixed")  # foottof.ppo.train.LR_SCHEDULES
-POLICIES = ("lstm", "mlp")  # foottof.ppo.networks.POLICIES
-ACTIVATIONS = ("elu", "relu", "tanh", "silu")  # foottof.ppo.networks.ACTIVATIONS
-TOF_MAX_RATE_HZ = {4: 60.0, 8: 15.0}  # foottof.sensors.tof.MAX_RATE_HZ
-LEVEL_RANGES = {  # foottof.eval.robustness.LEVEL_RANGES (without 'none')
-    "joint_offset": (0.0, 0.3),
-    "shank_length": (0.8, 1.2),
-    "odometry": (0.0, 10.0),
-}
-MAX_CELL_M = 0.04  # foottof.terrain.tiles: heightfield spacing bound [m]
-MAX_TIMESTEP_S = 0.01  # foottof.robot.model: physics step bound [s]
-CONTROL_DT_S = 0.02  # foottof.constants.CONTROL_DT_S: the policy period [s]
-TILT_LIMIT_DEG = 90.0  # foottof.sensors.tof.TILT_LIMIT_DEG
 
 
 class ConfigError(ValueError):
@@ -351,9 +348,8 @@ def _leaves(cfg, prefix=""):
             yield path, v
 
 
-def _check_cross(c) -> None:
-    """Checks between fields (divisibility, ordering, lengths)."""
-    p = c.ppo
+def _check_ppo_cross(p) -> None:
+    """Checks between fields of c.ppo (divisibility, ordering)."""
     if p.num_envs % p.num_minibatches:
         _fail(
             "ppo.num_envs",
@@ -367,6 +363,11 @@ def _check_cross(c) -> None:
             p.learning_rate,
             f"must be in [ppo.lr_min, ppo.lr_max] = [{p.lr_min:g}, {p.lr_max:g}]",
         )
+
+
+def _check_cross(c) -> None:
+    """Checks between fields (divisibility, ordering, lengths)."""
+    _check_ppo_cross(c.ppo)
     t = c.terrain
     if t.up_progress_frac < t.down_progress_frac:
         _fail(
@@ -458,6 +459,21 @@ def _check_cross(c) -> None:
     sat = c.env.control.get("saturation_torque")
     if sat is not None and _num(0.0, lo_open=True)(sat):
         _fail("env.control.saturation_torque", sat, "must be None or a number > 0")
+
+
+def check_sections(cfg, sections: tuple[str, ...]) -> None:
+    """The rules of ``sections`` only (e.g. ("ppo", "network") for the trainer's make_train,
+    which may get a config without the env sections): the same RULES and cross-field checks as
+    :func:`check_config`, one line per bad field (ConfigError)."""
+    for pattern, check in RULES.items():
+        if pattern.split(".")[0] not in sections:
+            continue
+        for path, value in _items(cfg, pattern):
+            why = check(value)
+            if why:
+                _fail(path, value, why)
+    if "ppo" in sections:
+        _check_ppo_cross(cfg.ppo)
 
 
 def check_config(cfg: ml_collections.ConfigDict) -> None:

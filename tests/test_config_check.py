@@ -94,21 +94,21 @@ def test_every_rule_names_a_field_of_the_base_config():
     assert not dead, dead
 
 
-def test_copied_names_match_their_modules():
-    from foottof import constants, perception, physics
+def test_allowed_values_live_once():
+    """The modules and config_check read the same objects from foottof.limits (no copies)."""
+    from foottof import limits, perception, physics
     from foottof.eval import robustness
     from foottof.ppo import networks, train
     from foottof.sensors import tof
 
-    assert cc.SOURCES == tuple(perception.SOURCES)
-    assert cc.PHYSICS_BACKENDS == tuple(physics.BACKENDS)
-    assert cc.CONTROL_DT_S == constants.CONTROL_DT_S
-    assert cc.LR_SCHEDULES == tuple(train.LR_SCHEDULES)
-    assert cc.POLICIES == tuple(networks.POLICIES)
-    assert cc.ACTIVATIONS == tuple(networks.ACTIVATIONS)
-    assert cc.TOF_MAX_RATE_HZ == dict(tof.MAX_RATE_HZ)
-    assert cc.TILT_LIMIT_DEG == tof.TILT_LIMIT_DEG
-    assert cc.LEVEL_RANGES == {k: v for k, v in robustness.LEVEL_RANGES.items() if k != "none"}
+    assert cc.SOURCES is perception.SOURCES
+    assert physics.BACKENDS is limits.PHYSICS_BACKENDS is cc.PHYSICS_BACKENDS
+    assert train.LR_SCHEDULES is limits.LR_SCHEDULES is cc.LR_SCHEDULES
+    assert networks.POLICIES is limits.POLICIES is cc.POLICIES
+    assert tuple(networks.ACTIVATIONS) == limits.ACTIVATIONS == cc.ACTIVATIONS
+    assert tof.MAX_RATE_HZ is limits.TOF_MAX_RATE_HZ is cc.TOF_MAX_RATE_HZ
+    assert tof.TILT_LIMIT_DEG is limits.TILT_LIMIT_DEG is cc.TILT_LIMIT_DEG
+    assert robustness.LEVEL_RANGES is limits.LEVEL_RANGES is cc.LEVEL_RANGES
 
 
 def test_check_imports_no_jax():

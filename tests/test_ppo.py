@@ -100,7 +100,7 @@ def test_max_noise_std_caps_the_sampled_actions_and_the_logged_std():
     )
     np.testing.assert_allclose(np.std(np.asarray(a - m), axis=0), 0.2, rtol=0.06)
     cfg.network.max_noise_std = -0.1
-    with pytest.raises(ValueError, match=r"network.max_noise_std=-0.1; must be >= 0"):
+    with pytest.raises(ValueError, match=r"network.max_noise_std=-0.1: must be a number >= 0"):
         train_lib.make_train(env, cfg)
 
 
@@ -421,7 +421,7 @@ def test_bad_config_values():
     env = toy_envs.make_memory_env()
     with pytest.raises(ValueError, match="ppo.num_envs=0"):
         train_lib.make_train(env, small_cfg(num_envs=0))
-    with pytest.raises(ValueError, match=r"ppo.num_envs=10 .*num_minibatches"):
+    with pytest.raises(ValueError, match=r"ppo.num_envs=10: .*num_minibatches"):
         train_lib.make_train(env, small_cfg(num_envs=10, num_minibatches=4))
     with pytest.raises(ValueError, match="device count 3"):
         train_lib.make_train(env, small_cfg(num_envs=64), devices=jax.devices() * 3)

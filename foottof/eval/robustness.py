@@ -25,16 +25,12 @@ import numpy as np
 
 from foottof.eval.harness import make_eval_env_and_policy, perturbed_reset
 from foottof.eval.results import summarize
+from foottof.limits import LEVEL_RANGES  # valid closed range of each perturbation's levels
 from foottof.perception import check_source
 from foottof.terrain import TERRAIN_TYPES
 
 PERTURBATIONS = ("none", "joint_offset", "shank_length", "odometry")
-LEVEL_RANGES = {  # valid closed range of the levels of each perturbation
-    "none": (0.0, 0.0),
-    "joint_offset": (0.0, 0.3),
-    "shank_length": (0.8, 1.2),
-    "odometry": (0.0, 10.0),
-}
+
 # Each source's sweep when no perturbation is asked for: the one it is compared on in the paper's
 # robustness figure (A: joint offset, tof vs mock_ideal; C: odometry, tof vs mock_aggre).
 HEADLINE_SWEEPS = {"tof": "joint_offset", "mock_ideal": "joint_offset", "mock_aggre": "odometry"}

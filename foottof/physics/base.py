@@ -12,8 +12,8 @@ import numpy as np
 from flax import struct
 
 from foottof import constants
+from foottof.limits import PHYSICS_BACKENDS as BACKENDS  # valid env.physics values
 
-BACKENDS = ("auto", "mjx", "mujoco")  # valid env.physics values
 _warned_host_roundtrip = False
 
 

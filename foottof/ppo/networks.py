@@ -11,6 +11,8 @@ import jax.numpy as jp
 import ml_collections
 from brax.training.acme import running_statistics
 
+from foottof import config_check, limits
+
 Carry = (
     Any  # {'actor': ((c, h), ...), 'critic': ((c, h), ...)} per LSTM layer, each (B, H); () for MLP
 )
@@ -18,7 +20,8 @@ Params = Any  # flax variables {'params': {...}}
 Obs = Any  # (B, obs) array, or {'state': (B, obs_actor), 'privileged_state': (B, obs_critic)}
 
 ACTIVATIONS = {"elu": nn.elu, "relu": nn.relu, "tanh": nn.tanh, "silu": nn.silu}
-POLICIES = ("lstm", "mlp")
+assert tuple(ACTIVATIONS) == limits.ACTIVATIONS  # the names config_check allows
+POLICIES = limits.POLICIES
 ACTOR_KEY = "state"  # Brax/Playground key of the actor observation in a dict observation
 CRITIC_KEY = "privileged_state"  # key of the critic (privileged) observation
 
@@ -241,18 +244,8 @@ class Networks:
 def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> Networks:
     """Builds the actor-critic from c.network (see configs/_ppo.py)."""
     n = network_cfg
-    if n.policy not in POLICIES:
-        raise ValueError(f"network.policy={n.policy!r}; valid: {POLICIES}")
-    if n.activation not in ACTIVATIONS:
-        raise ValueError(f"network.activation={n.activation!r}; valid: {tuple(ACTIVATIONS)}")
-    for name in ("lstm_hidden_size", "lstm_num_layers"):
-        if int(n[name]) < 1:
-            raise ValueError(f"network.{name}={n[name]}; must be >= 1")
-    if not n.init_noise_std > 0:
-        raise ValueError(f"network.init_noise_std={n.init_noise_std}; must be > 0")
+    config_check.check_sections({"network": n}, ("network",))  # the rules, held there once
     max_std = float(n.get("max_noise_std", 0.0))
-    if not max_std >= 0:
-        raise ValueError(f"network.max_noise_std={max_std}; must be >= 0 (0: no cap)")
     module = ActorCritic(
         action_size=int(action_size),
         recurrent=n.policy == "lstm",

@@ -24,12 +24,14 @@ from flax import struct
 from jax.sharding import Mesh, NamedSharding
 from jax.sharding import PartitionSpec as P
 
+from foottof import config_check
 from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-exported)
+from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
 from foottof.ppo import losses
 from foottof.ppo import networks as net
 
 AXIS = "data"  # mesh axis over envs (all devices of all hosts)
-LR_SCHEDULES = ("adaptive", "fixed")
+
 EPISODE_PREFIX = "episode/"  # env metrics with this prefix are averaged over done steps only
 
 
@@ -78,12 +80,11 @@ class Train(NamedTuple):
     steps_per_iteration: int  # env steps per iteration over all envs (num_envs * num_steps)
 
 
-def _validate(ppo: ml_collections.ConfigDict, num_devices: int) -> None:
-    for name in ("num_envs", "num_steps", "num_epochs", "num_minibatches"):
-        if int(ppo[name]) < 1:
-            raise ValueError(f"ppo.{name}={ppo[name]}; must be a positive integer")
-    if ppo.lr_schedule not in LR_SCHEDULES:
-        raise ValueError(f"ppo.lr_schedule={ppo.lr_schedule!r}; valid: {LR_SCHEDULES}")
+def _validate(cfg: ml_collections.ConfigDict, num_devices: int) -> None:
+    """The ppo / network rules of foottof.config_check (held there once), and the one rule that
+    needs the devices: whole minibatches of envs on every device."""
+    config_check.check_sections(cfg, ("ppo", "network"))
+    ppo = cfg.ppo
     if ppo.num_envs % num_devices:
         raise ValueError(
             f"ppo.num_envs={ppo.num_envs} is not divisible by the device count {num_devices}"
@@ -93,14 +94,6 @@ def _validate(ppo: ml_collections.ConfigDict, num_devices: int) -> None:
             f"ppo.num_envs={ppo.num_envs} is not divisible by ppo.num_minibatches * devices = "
             f"{ppo.num_minibatches} * {num_devices}"
         )
-    if not 0 < ppo.lr_min <= ppo.learning_rate <= ppo.lr_max:
-        raise ValueError(
-            f"ppo.learning_rate={ppo.learning_rate}; must lie in [lr_min, lr_max] = "
-            f"[{ppo.lr_min}, {ppo.lr_max}] with lr_min > 0"
-        )
-    for name in ("gamma", "gae_lambda"):
-        if not 0.0 <= ppo[name] <= 1.0:
-            raise ValueError(f"ppo.{name}={ppo[name]}; must lie in [0, 1]")
 
 
 def _check_env_state(state_shape, num_envs: int) -> None:
@@ -146,7 +139,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     """
     ppo = cfg.ppo
     devices = list(jax.devices() if devices is None else devices)
-    _validate(ppo, len(devices))
+    _validate(cfg, len(devices))
     num_envs, num_steps = int(ppo.num_envs), int(ppo.num_steps)
     num_minibatches, num_epochs = int(ppo.num_minibatches), int(ppo.num_epochs)
     gamma, lam = float(ppo.gamma), float(ppo.gae_lambda)

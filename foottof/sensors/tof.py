@@ -11,11 +11,10 @@ import numpy as np
 from flax import struct
 
 from foottof import constants
+from foottof.limits import TILT_LIMIT_DEG  # |extra tilt| about each site axis
+from foottof.limits import TOF_MAX_RATE_HZ as MAX_RATE_HZ  # VL53L5CX rates
 from foottof.sensors.raycast import ray_heightfield_normal
 from foottof.terrain.heightfield import Heightfield
-
-MAX_RATE_HZ = {4: 60.0, 8: 15.0}  # VL53L5CX: 4x4 up to 60 Hz, 8x8 up to 15 Hz
-TILT_LIMIT_DEG = 90.0  # |extra tilt| about each site axis must stay below this
 
 
 @dataclasses.dataclass(frozen=True)

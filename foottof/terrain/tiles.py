@@ -10,6 +10,8 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
+from foottof.limits import MAX_CELL_M
+
 # The paper's nine types, in order: stage 1 (first five), then the four stage-2 additions.
 TERRAIN_TYPES = (
     "grid_stones",
@@ -125,8 +127,8 @@ class TileSpec:
     def __post_init__(self):
         if not 0.0 < self.foot_radius_m <= 0.1:
             raise ValueError(f"foot_radius_m={self.foot_radius_m} must be in (0, 0.1] m")
-        if not 0.0 < self.cell_m <= 0.04:
-            raise ValueError(f"cell_m={self.cell_m} must be in (0, 0.04] m")
+        if not 0.0 < self.cell_m <= MAX_CELL_M:
+            raise ValueError(f"cell_m={self.cell_m} must be in (0, {MAX_CELL_M}] m")
         for name in ("length_m", "width_m", "platform_length_m", "goal_length_m"):
             value = getattr(self, name)
             n = value / self.cell_m

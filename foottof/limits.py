@@ -1,0 +1,23 @@
+"""Allowed values and ranges, defined once (imports no JAX): the modules that own them and
+foottof.config_check (which checks a whole config before JAX is imported) both read them here."""
+
+# Physics (foottof.physics): the env.physics backends; the physics step bound [s].
+PHYSICS_BACKENDS = ("auto", "mjx", "mujoco")
+MAX_TIMESTEP_S = 0.01
+# Trainer (foottof.ppo): learning-rate schedules, policy kinds, MLP activations.
+LR_SCHEDULES = ("adaptive", "fixed")
+POLICIES = ("lstm", "mlp")
+ACTIVATIONS = ("elu", "relu", "tanh", "silu")
+# ToF sensor (foottof.sensors.tof): VL53L5CX 4x4 up to 60 Hz, 8x8 up to 15 Hz; |extra tilt|
+# about each site axis below this [deg].
+TOF_MAX_RATE_HZ = {4: 60.0, 8: 15.0}
+TILT_LIMIT_DEG = 90.0
+# Terrain (foottof.terrain.tiles): heightfield vertex spacing bound [m].
+MAX_CELL_M = 0.04
+# Evaluation (foottof.eval.robustness): valid closed range of each perturbation's levels.
+LEVEL_RANGES = {
+    "none": (0.0, 0.0),
+    "joint_offset": (0.0, 0.3),
+    "shank_length": (0.8, 1.2),
+    "odometry": (0.0, 10.0),
+}

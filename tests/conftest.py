@@ -26,7 +26,8 @@ if _level and "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS"
 # 370, sources 263, analysis 227, evaluate 196, ppo 193, terrain 116; the rest < 60 each.
 _HEAVY_FIRST = (
     "test_env.py",
-    "test_sensors.py",
+    "test_raycast.py",
+    "test_tof.py",
     "test_sources.py",
     "test_analysis.py",
     "test_evaluate.py",

@@ -6,6 +6,7 @@ import sys
 
 import jax
 import ml_collections
+import mujoco
 import numpy as np
 
 from configs import _ppo
@@ -59,3 +60,18 @@ def run_cli(script: str, *args: str, timeout: int = 600) -> subprocess.Completed
         env=env,
         timeout=timeout,
     )
+
+
+def hfield_mj_model(hf, geom_attrs: str = "", bodies: str = "", option: str = ""):
+    """(MjModel, MjData after mj_forward) of heightfield ``hf`` alone or with ``bodies`` (MJCF
+    <body> elements), its heights written in: the MuJoCo C oracle of the terrain tests."""
+    from foottof.terrain.heightfield import hfield_xml, write_to_mjmodel
+
+    asset, geom = hfield_xml(hf, geom_attrs=geom_attrs)
+    m = mujoco.MjModel.from_xml_string(
+        f"<mujoco>{option}<asset>{asset}</asset><worldbody>{geom}{bodies}</worldbody></mujoco>"
+    )
+    write_to_mjmodel(m, hf)
+    d = mujoco.MjData(m)
+    mujoco.mj_forward(m, d)
+    return m, d

@@ -7,13 +7,13 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
+from helpers import hfield_mj_model
 
 from configs import flat
 from foottof.envs.anymal_tof import critic_height_scan, critic_scan_points
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo.networks import make_networks
 from foottof.terrain import Heightfield
-from foottof.terrain.heightfield import hfield_xml, write_to_mjmodel
 
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 FLAT_POLICY = os.path.join(ROOT, "policies", "flat")
@@ -22,13 +22,7 @@ ACTOR_OBS, CRITIC_OBS = 181, 223  # policies/flat's observation sizes (its check
 
 def _mj_ray_heights(hf: Heightfield, xy: np.ndarray) -> np.ndarray:
     """Oracle: MuJoCo C's mj_ray straight down onto the hfield geom at each (x, y) [m]."""
-    asset, geom = hfield_xml(hf)
-    m = mujoco.MjModel.from_xml_string(
-        f"<mujoco><asset>{asset}</asset><worldbody>{geom}</worldbody></mujoco>"
-    )
-    write_to_mjmodel(m, hf)
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
+    m, d = hfield_mj_model(hf)
     top = hf.z_floor_m + hf.z_range_m + 1.0
     geomid = np.zeros(1, np.int32)
     out = []

@@ -7,6 +7,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
+from helpers import hfield_mj_model
 
 from foottof import constants, perception
 from foottof.perception import cameras as cam_lib
@@ -15,7 +16,7 @@ from foottof.perception import odometry as odom
 from foottof.perception import sources
 from foottof.robot import kinematics as kin
 from foottof.sensors import tof
-from foottof.terrain.heightfield import Heightfield, hfield_xml, write_to_mjmodel
+from foottof.terrain.heightfield import Heightfield
 from foottof.terrain.tiles import TileSpec, generate_tile
 
 SPEC = TileSpec()
@@ -104,13 +105,7 @@ def test_camera_bad_fov_raises():
 
 def test_height_scan_matches_mj_ray(stones_hf):
     """Vertical mj_ray on the compiled MuJoCo hfield at every scan vertex (rotated base)."""
-    asset, geom = hfield_xml(stones_hf)
-    m = mujoco.MjModel.from_xml_string(
-        f"<mujoco><asset>{asset}</asset><worldbody>{geom}</worldbody></mujoco>"
-    )
-    write_to_mjmodel(m, stones_hf)
-    d = mujoco.MjData(m)
-    mujoco.mj_forward(m, d)
+    m, d = hfield_mj_model(stones_hf)
     base = np.array([3.0, 2.0, 0.6])
     yaw = 0.7
     scan = np.asarray(em.height_scan(stones_hf, jp.asarray(base, jp.float32), jp.float32(yaw)))

@@ -8,6 +8,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
+from helpers import hfield_mj_model
 from scipy import ndimage
 
 from configs import _eval, _terrain
@@ -31,7 +32,7 @@ from foottof.terrain import (
     tile_at,
     update_levels,
 )
-from foottof.terrain.heightfield import hfield_xml, write_to_mjmodel, write_to_mjx
+from foottof.terrain.heightfield import write_to_mjx
 from foottof.terrain.terrain_map import tile_generator
 from foottof.terrain.tiles import STONE_TYPES, crack_sag_m, stone_params
 
@@ -336,18 +337,12 @@ def _sphere_targets(z, num):
 
 def _drop_model(z, targets, pit_xy, radius):
     hf = Heightfield(heights=jp.asarray(z), cell_m=CELL, z_floor_m=PIT, z_range_m=SPEC.z_range_m)
-    asset, geom = hfield_xml(hf, geom_attrs='contype="2" conaffinity="1"')
     bodies = "".join(
         f'<body pos="{x} {y} {top + radius + 0.15}"><freejoint/>'
         f'<geom type="sphere" size="{radius}" mass="0.5" contype="1" conaffinity="2"/></body>'
         for x, y, top in [*targets, (*pit_xy, PIT)]
     )
-    xml = (
-        f'<mujoco><option timestep="0.002"/><asset>{asset}</asset>'
-        f"<worldbody>{geom}{bodies}</worldbody></mujoco>"
-    )
-    m = mujoco.MjModel.from_xml_string(xml)
-    write_to_mjmodel(m, hf)
+    m, _ = hfield_mj_model(hf, 'contype="2" conaffinity="1"', bodies, '<option timestep="0.002"/>')
     return m, hf
 
 
@@ -404,19 +399,17 @@ def _drop_loaded_feet(z, points_xy):
     """MuJoCo C: 3.15 cm foot spheres, each pressed down with FOOT_LOAD_N, dropped from 5 cm above
     the tile at ``points_xy`` (local [m]); (N, 3) foot-centre positions after 1.5 s."""
     hf = Heightfield(heights=jp.asarray(z), cell_m=CELL, z_floor_m=PIT, z_range_m=SPEC.z_range_m)
-    asset, geom = hfield_xml(hf, geom_attrs='contype="2" conaffinity="1"')
     bodies = "".join(
         f'<body pos="{x} {y} {FOOT_R + 0.05}"><freejoint/><geom type="sphere" size="{FOOT_R}" '
         'mass="1" friction="1" contype="1" conaffinity="2"/></body>'
         for x, y in points_xy
     )
-    xml = (
-        '<mujoco><option timestep="0.002" impratio="100" cone="pyramidal"/>'
-        f"<asset>{asset}</asset><worldbody>{geom}{bodies}</worldbody></mujoco>"
+    m, d = hfield_mj_model(
+        hf,
+        geom_attrs='contype="2" conaffinity="1"',
+        bodies=bodies,
+        option='<option timestep="0.002" impratio="100" cone="pyramidal"/>',
     )
-    m = mujoco.MjModel.from_xml_string(xml)
-    write_to_mjmodel(m, hf)
-    d = mujoco.MjData(m)
     d.xfrc_applied[1:, 2] = -(FOOT_LOAD_N - 9.81)  # gravity carries 1 kg of the load
     for _ in range(750):
         mujoco.mj_step(m, d)

@@ -50,3 +50,25 @@ def test_cli_prints_one_row_per_type(capsys):
     rows = {line.split()[0] for line in out[2:]}
     assert rows == {"grid_stones", "two_row_stones", "rough_boxes", "platform_gap",
                     "mixed_row_stones"}  # fmt: skip
+
+
+def test_failure_causes_from_step_records():
+    """foottof.lab.failures.classify on hand-made step records (T=4 steps, 6 envs)."""
+    import numpy as np
+
+    from foottof.lab.failures import CAUSES, classify
+
+    done = np.array(
+        [[0, 1, 0, 0, 0, 0], [1, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0]]
+    )
+    success = np.zeros((4, 6))
+    success[1, 0] = 1  # env 0: success at step 1
+    failed = np.zeros((4, 6))
+    failed[0, 1] = failed[1, 2] = failed[2, 3] = 1  # envs 1-3 failed
+    stuck = np.zeros((4, 6))
+    stuck[0, 1] = 1  # env 1: a foot in a gap
+    base_z = np.full((4, 6), 0.5)
+    base_z[1, 2] = -0.3  # env 2: base down in a gap
+    # env 3: another fall; env 4: done without success or failure (timeout); env 5: never ended
+    got = [CAUSES[i] for i in classify(done, success, failed, stuck, base_z)]
+    assert got == ["success", "foot_stuck", "fell_base_low", "other_fall", "timeout", "timeout"]

@@ -1,0 +1,129 @@
+"""Why episodes fail: each env's first episode on the evaluation ensemble sorted into a cause.
+
+``python -m foottof.lab.failures RUN_DIR [--config configs/stage1_cpu.py] [--difficulty_fraction
+0.111] [--episodes 100] [--seed 5]`` runs the run's policy (mean actions) for one episode per env
+on the evaluation map at ``eval.difficulty_fraction`` of the stage-1 range and prints, per terrain
+type, how many episodes ended in each cause with the mean step and progress at the end:
+
+- ``success``: ended at the deadline within the success radius;
+- ``foot_stuck``: a foot went into a gap (``env.foot_stuck_depth_m``);
+- ``fell_base_low``: another failure with the base below the terrain's top (into a gap);
+- ``other_fall``: another failure (base or knee contact, flip, divergence);
+- ``timeout``: reached the deadline away from the goal (slow or stuck in place).
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib.util
+
+import numpy as np
+
+CAUSES = ("success", "foot_stuck", "fell_base_low", "other_fall", "timeout")
+
+
+def classify(done, success, failed, stuck, base_z) -> np.ndarray:
+    """(E,) cause index into CAUSES of each env's first episode, from (T, E) step records; an
+    env whose episode did not end within T steps counts as a timeout."""
+    ended = done > 0.5
+    t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), done.shape[0] - 1)
+    e = np.arange(done.shape[1])
+    at = lambda a: a[t, e]  # noqa: E731
+    return np.select(
+        [
+            at(success) > 0.5,
+            at(stuck) > 0.5,
+            (at(failed) > 0.5) & (at(base_z) < 0.2),
+            at(failed) > 0.5,
+        ],
+        [0, 1, 2, 3],
+        default=4,
+    )
+
+
+def run(cfg, checkpoint: str, episodes: int, seed: int):
+    """(cause per env, terrain type name per env, end step, progress at the end)."""
+    import jax
+    import jax.numpy as jp
+
+    from foottof.eval.harness import make_eval_env_and_policy
+    from foottof.terrain import TERRAIN_TYPES
+
+    key = jax.random.PRNGKey(seed)
+    env, nets, params, norm = make_eval_env_and_policy(cfg, "tof", checkpoint, key, key)
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(key, episodes))
+    act = nets.policy_fn(params, norm, deterministic=True)
+    step = jax.vmap(env.step)
+
+    @jax.jit
+    def rollout(state):
+        def body(c, k):
+            s, lstm, first = c
+            lstm, a = act(lstm, s.obs, first, k)
+            s2 = step(s, a)
+            m = s2.metrics
+            rec = (s2.done, m["episode/success"], m["episode/failed"], m["episode/foot_stuck"])
+            rec += (s.pipeline_state.qpos[:, 2], m["episode/progress"], s.info["task"].col)
+            return (s2, lstm, s2.done > 0.5), rec
+
+        init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
+        return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
+
+    done, succ, fail, stuck, base_z, prog, col = (
+        np.asarray(x) for x in jax.device_get(rollout(state))
+    )
+    cause = classify(done, succ, fail, stuck, base_z)
+    ended = done > 0.5
+    t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), done.shape[0] - 1)
+    e = np.arange(episodes)
+    types = np.asarray(env.tmap.col_type)[col[0]]
+    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e]
+
+
+def format_table(cause, types, end_step, progress) -> str:
+    lines = [
+        "| terrain | episodes | " + " | ".join(CAUSES) + " |",
+        "|---|---|" + "---|" * len(CAUSES),
+    ]
+    for name in sorted(set(types)) + ["all"]:
+        sel = np.array([name in ("all", t) for t in types])
+        cells = []
+        for i in range(len(CAUSES)):
+            m = sel & (cause == i)
+            cells.append(
+                f"{m.sum()} (step {end_step[m].mean():.0f}, prog {progress[m].mean():.2f})"
+                if m.any()
+                else "0"
+            )
+        lines.append(f"| {name} | {sel.sum()} | " + " | ".join(cells) + " |")
+    return "\n".join(lines)
+
+
+def _load_config(path: str):
+    spec = importlib.util.spec_from_file_location("cfg", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.get_config()
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("run_dir", help="run directory, its checkpoints/ or one checkpoint")
+    ap.add_argument("--config", default="configs/stage1_cpu.py")
+    ap.add_argument("--difficulty_fraction", type=float, default=0.9)
+    ap.add_argument("--episodes", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=5)
+    args = ap.parse_args(argv)
+    if not 0.0 <= args.difficulty_fraction <= 1.0:
+        raise SystemExit(f"error: --difficulty_fraction={args.difficulty_fraction} outside [0, 1]")
+    if args.episodes < 1:
+        raise SystemExit(f"error: --episodes={args.episodes} must be >= 1")
+    from foottof.ppo.run_dir import with_run_network
+
+    cfg = with_run_network(_load_config(args.config), args.run_dir)
+    cfg.eval.difficulty_fraction = args.difficulty_fraction
+    print(format_table(*run(cfg, args.run_dir, args.episodes, args.seed)))
+
+
+if __name__ == "__main__":
+    main()

@@ -379,9 +379,9 @@ def test_knee_contact_is_a_penalty_unless_configured(env, on_columns, terminates
         qpos = _kneeling(e, xy, depth)
         fk = kinematics.world_foot_kinematics(qpos, e.shank_scale)
         gravity = jp.array([0.0, 0.0, -1.0])
-        failed, knees = e._failed(types.SimpleNamespace(qpos=qpos), gravity, fk)
+        failed, knees, stuck = e._failed(types.SimpleNamespace(qpos=qpos), gravity, fk)
         assert (float(jp.sum(knees)) > 0) == touching
-        assert bool(failed) == (touching and terminates)
+        assert bool(failed) == (touching and terminates) and not bool(stuck)  # flat: no gap
 
 
 def test_spawn_pays_no_penalty_events(fns, on_columns):

@@ -84,9 +84,9 @@ class Sensing:
         self.source = source
         self.hfield = hfield
         self.shank_scale = float(shank_scale)
-        self.spec = tof.make_spec(cfg.sensor)
-        self.timing = timing.make_timing_spec(self.spec, cfg.noise, constants.CONTROL_DT_S)
-        self.bounds = deg.bounds_from_config(cfg.noise, int(cfg.stage), self.timing)
+        self.spec = tof.ToFSpec.from_config(cfg.sensor)
+        self.timing = timing.TimingSpec.from_config(self.spec, cfg.noise, constants.CONTROL_DT_S)
+        self.bounds = deg.DegradationBounds.from_config(cfg.noise, int(cfg.stage), self.timing)
         self.model = load_model(cfg.noise.model_path or None)
         sites = tuple(cfg.sensor.sites)
         bad = [s for s in sites if s not in constants.TOF_SITES]

@@ -35,6 +35,42 @@ class DegradationBounds:
     min_delay_steps: jax.Array
     max_delay_steps: jax.Array
 
+    @classmethod
+    def from_config(cls, noise_cfg, stage: int, spec=None) -> DegradationBounds:
+        """DegradationBounds of ``noise.stage{stage}`` (config read outside jit, validated).
+
+        ``spec`` is the pipeline's foottof.sensors.timing.TimingSpec (its delay capacity bounds the
+        delay range), or None.
+
+        Raises:
+          ValueError: unknown stage, negative bounds, missing_rate > 1, or a delay range outside
+            0 <= min <= max <= spec.delay_capacity_steps (the timing ring buffer; unchecked without
+            ``spec``).
+        """
+        if stage not in (1, 2):
+            raise ValueError(f"stage must be 1 or 2, got {stage!r}")
+        c = noise_cfg[f"stage{stage}"]
+        vals = {f: float(c[f]) for f in _FIELDS}
+        for f, v in vals.items():
+            if not v >= 0.0:
+                raise ValueError(f"noise.stage{stage}.{f} must be >= 0, got {v!r}")
+        if vals["missing_rate"] > 1.0:
+            raise ValueError(
+                f"noise.stage{stage}.missing_rate must be in [0, 1], got {vals['missing_rate']!r}"
+            )
+        lo, hi = int(c.min_delay_steps), int(c.max_delay_steps)
+        cap = spec.delay_capacity_steps if spec is not None else hi
+        if not 0 <= lo <= hi <= cap:
+            raise ValueError(
+                f"noise.stage{stage} delay range [{lo}, {hi}] must satisfy 0 <= min <= max <= {cap} "
+                f"(ring-buffer capacity)"
+            )
+        return cls(
+            **{f: jp.float32(v) for f, v in vals.items()},
+            min_delay_steps=jp.int32(lo),
+            max_delay_steps=jp.int32(hi),
+        )
+
 
 @struct.dataclass
 class DegradationLevels:
@@ -53,39 +89,9 @@ class DegradationLevels:
 
 
 def bounds_from_config(noise_cfg, stage: int, spec=None) -> DegradationBounds:
-    """DegradationBounds of ``noise.stage{stage}`` (config read outside jit, validated).
-
-    ``spec`` is the pipeline's foottof.sensors.timing.TimingSpec (its delay capacity bounds the
-    delay range), or None.
-
-    Raises:
-      ValueError: unknown stage, negative bounds, missing_rate > 1, or a delay range outside
-        0 <= min <= max <= spec.delay_capacity_steps (the timing ring buffer; unchecked without
-        ``spec``).
-    """
-    if stage not in (1, 2):
-        raise ValueError(f"stage must be 1 or 2, got {stage!r}")
-    c = noise_cfg[f"stage{stage}"]
-    vals = {f: float(c[f]) for f in _FIELDS}
-    for f, v in vals.items():
-        if not v >= 0.0:
-            raise ValueError(f"noise.stage{stage}.{f} must be >= 0, got {v!r}")
-    if vals["missing_rate"] > 1.0:
-        raise ValueError(
-            f"noise.stage{stage}.missing_rate must be in [0, 1], got {vals['missing_rate']!r}"
-        )
-    lo, hi = int(c.min_delay_steps), int(c.max_delay_steps)
-    cap = spec.delay_capacity_steps if spec is not None else hi
-    if not 0 <= lo <= hi <= cap:
-        raise ValueError(
-            f"noise.stage{stage} delay range [{lo}, {hi}] must satisfy 0 <= min <= max <= {cap} "
-            f"(ring-buffer capacity)"
-        )
-    return DegradationBounds(
-        **{f: jp.float32(v) for f, v in vals.items()},
-        min_delay_steps=jp.int32(lo),
-        max_delay_steps=jp.int32(hi),
-    )
+    """Alias of :meth:`DegradationBounds.from_config` (the name before the one adapter
+    convention)."""
+    return DegradationBounds.from_config(noise_cfg, stage, spec)
 
 
 def zero_levels(num_sensors: int) -> DegradationLevels:

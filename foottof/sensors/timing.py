@@ -37,6 +37,15 @@ class TimingSpec:
     delay_capacity_steps: int = 4
     control_dt_s: float = constants.CONTROL_DT_S
 
+    @classmethod
+    def from_config(
+        cls, sensor: ToFSpec, noise_cfg, control_dt_s: float = constants.CONTROL_DT_S
+    ) -> TimingSpec:
+        """TimingSpec whose delay capacity is the largest ``max_delay_steps`` of ``noise.stage1`` /
+        ``noise.stage2`` (so one compiled pipeline serves both stages)."""
+        cap = max(int(noise_cfg[s].max_delay_steps) for s in ("stage1", "stage2"))
+        return cls(sensor, delay_capacity_steps=cap, control_dt_s=float(control_dt_s))
+
     def __post_init__(self):
         if self.delay_capacity_steps < 0:
             raise ValueError(
@@ -69,10 +78,8 @@ class TimingSpec:
 def make_timing_spec(
     sensor: ToFSpec, noise_cfg, control_dt_s: float = constants.CONTROL_DT_S
 ) -> TimingSpec:
-    """TimingSpec whose delay capacity is the largest ``max_delay_steps`` of ``noise.stage1`` /
-    ``noise.stage2`` (so one compiled pipeline serves both stages)."""
-    cap = max(int(noise_cfg[s].max_delay_steps) for s in ("stage1", "stage2"))
-    return TimingSpec(sensor, delay_capacity_steps=cap, control_dt_s=float(control_dt_s))
+    """Alias of :meth:`TimingSpec.from_config` (the name before the one adapter convention)."""
+    return TimingSpec.from_config(sensor, noise_cfg, control_dt_s)
 
 
 @struct.dataclass

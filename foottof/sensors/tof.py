@@ -52,6 +52,32 @@ class ToFSpec:
     tilt_deg: tuple = ((0.0, 0.0),) * constants.NUM_FEET
     offset_m: tuple = ((0.0, 0.0, 0.0),) * constants.NUM_FEET
 
+    @classmethod
+    def from_config(cls, sensor_cfg) -> ToFSpec:
+        """ToFSpec from the ``sensor`` config section (frame timing: foottof.sensors.timing).
+
+        Raises:
+          ValueError: bad resolution, rate, tilt, offsets or sensor count (message names the value).
+        """
+        n = len(sensor_cfg.sites)
+        tilt_x = tuple(float(v) for v in sensor_cfg.tilt_x_deg)
+        tilt_y = tuple(float(v) for v in sensor_cfg.tilt_y_deg)
+        if len(tilt_x) != n or len(tilt_y) != n:
+            raise ValueError(
+                f"sensor.tilt_x_deg / tilt_y_deg need one value per site ({n}), got {len(tilt_x)} / "
+                f"{len(tilt_y)}"
+            )
+        return cls(
+            num_sensors=n,
+            grid=int(sensor_cfg.grid),
+            fov_deg=float(sensor_cfg.fov_deg),
+            max_range_m=float(sensor_cfg.max_range_m),
+            resolution_m=float(sensor_cfg.resolution_m),
+            rate_hz=float(sensor_cfg.rate_hz),
+            tilt_deg=tuple(zip(tilt_x, tilt_y, strict=True)),
+            offset_m=tuple(tuple(float(c) for c in o) for o in sensor_cfg.offset_m),
+        )
+
     def __post_init__(self):
         if self.grid not in MAX_RATE_HZ:
             raise ValueError(
@@ -149,29 +175,8 @@ class ToFSpec:
 
 
 def make_spec(sensor_cfg) -> ToFSpec:
-    """ToFSpec from the ``sensor`` config section (frame timing: foottof.sensors.timing).
-
-    Raises:
-      ValueError: bad resolution, rate, tilt, offsets or sensor count (message names the value).
-    """
-    n = len(sensor_cfg.sites)
-    tilt_x = tuple(float(v) for v in sensor_cfg.tilt_x_deg)
-    tilt_y = tuple(float(v) for v in sensor_cfg.tilt_y_deg)
-    if len(tilt_x) != n or len(tilt_y) != n:
-        raise ValueError(
-            f"sensor.tilt_x_deg / tilt_y_deg need one value per site ({n}), got {len(tilt_x)} / "
-            f"{len(tilt_y)}"
-        )
-    return ToFSpec(
-        num_sensors=n,
-        grid=int(sensor_cfg.grid),
-        fov_deg=float(sensor_cfg.fov_deg),
-        max_range_m=float(sensor_cfg.max_range_m),
-        resolution_m=float(sensor_cfg.resolution_m),
-        rate_hz=float(sensor_cfg.rate_hz),
-        tilt_deg=tuple(zip(tilt_x, tilt_y, strict=True)),
-        offset_m=tuple(tuple(float(c) for c in o) for o in sensor_cfg.offset_m),
-    )
+    """Alias of :meth:`ToFSpec.from_config` (the name before the one adapter convention)."""
+    return ToFSpec.from_config(sensor_cfg)
 
 
 def site_ids(m, names) -> np.ndarray:

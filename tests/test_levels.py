@@ -54,10 +54,10 @@ def test_cli_prints_one_row_per_type(capsys):
 
 
 def test_failure_causes_from_step_records():
-    """foottof.lab.failures.classify on hand-made step records (T=4 steps, 6 envs)."""
+    """foottof.eval.failures.classify on hand-made step records (T=4 steps, 6 envs)."""
     import numpy as np
 
-    from foottof.lab.failures import CAUSES, classify
+    from foottof.eval.failures import CAUSES, classify
 
     done = np.array(
         [[0, 1, 0, 0, 0, 0], [1, 0, 1, 0, 0, 0], [0, 0, 0, 1, 0, 0], [0, 0, 0, 0, 1, 0]]

@@ -778,11 +778,11 @@ def test_update_levels_bad_fraction_raises():
 
 
 def test_levels_table_level_zero_is_hazard_free():
-    """python -m foottof.terrain.levels_table: level 0 of every stage-1 pit type crosses no gap to
+    """python -m foottof.lab.levels_table: level 0 of every stage-1 pit type crosses no gap to
     the pit floor; level 1's narrowest drawn gap is wider than the foot (the top opening of a
     one-vertex gap spans two cells, 8 cm > 6.3 cm)."""
     from configs import stage1_cpu
-    from foottof.terrain import levels_table
+    from foottof.lab import levels_table
 
     rows = levels_table.table(stage1_cpu.get_config().terrain, seeds=1)
     assert {r["type"] for r in rows} == set(levels_table.TABLE_TYPES)

@@ -1,7 +1,7 @@
 """Per-type, per-level table of the stage-1 curricula: nominal stone size, gap and height spread,
 and what a foot meets, counted on generated tiles.
 
-``python -m foottof.terrain.levels_table [--config configs/stage1_cpu.py] [--seeds 6]`` prints a
+``python -m foottof.lab.levels_table [--config configs/stage1_cpu.py] [--seeds 6]`` prints a
 Markdown table (docs/terrain_levels.md holds its output). Per level of each stage-1 type with a
 pit: the difficulty d of the level (``terrain.stage1_difficulty``, ``terrain.num_levels``), the
 nominal parameters at d (tiles.STONE_SCHEDULES; platform gaps: the largest gap), and measured on
@@ -14,7 +14,6 @@ shallow cracks (narrower than the foot, drawn their sag deep) per metre.
 from __future__ import annotations
 
 import argparse
-import importlib.util
 
 import jax
 import numpy as np
@@ -99,21 +98,16 @@ def format_markdown(rows: list[dict]) -> str:
     return head + "\n".join(lines) + "\n"
 
 
-def _load_config(path: str):
-    spec = importlib.util.spec_from_file_location("cfg", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.get_config()
-
-
 def main(argv=None) -> None:
+    from configs import load_config  # the repo's config files (run from the repo root)
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default="configs/stage1_cpu.py")
     ap.add_argument("--seeds", type=int, default=6)
     args = ap.parse_args(argv)
     if args.seeds < 1:
         raise SystemExit(f"error: --seeds={args.seeds} must be >= 1")
-    print(format_markdown(table(_load_config(args.config).terrain, args.seeds)), end="")
+    print(format_markdown(table(load_config(args.config).terrain, args.seeds)), end="")
 
 
 if __name__ == "__main__":

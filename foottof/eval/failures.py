@@ -1,6 +1,6 @@
 """Why episodes fail: each env's first episode on the evaluation ensemble sorted into a cause.
 
-``python -m foottof.lab.failures RUN_DIR [--config configs/stage1_cpu.py] [--difficulty_fraction
+``python -m foottof.eval.failures RUN_DIR [--config configs/stage1_cpu.py] [--difficulty_fraction
 0.111] [--episodes 100] [--seed 5]`` runs the run's policy (mean actions) for one episode per env
 on the evaluation map at ``eval.difficulty_fraction`` of the stage-1 range and prints, per terrain
 type, how many episodes ended in each cause with the mean step and progress at the end:
@@ -15,7 +15,6 @@ type, how many episodes ended in each cause with the mean step and progress at t
 from __future__ import annotations
 
 import argparse
-import importlib.util
 
 import numpy as np
 
@@ -99,14 +98,9 @@ def format_table(cause, types, end_step, progress) -> str:
     return "\n".join(lines)
 
 
-def _load_config(path: str):
-    spec = importlib.util.spec_from_file_location("cfg", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module.get_config()
-
-
 def main(argv=None) -> None:
+    from configs import load_config  # the repo's config files (run from the repo root)
+
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run_dir", help="run directory, its checkpoints/ or one checkpoint")
     ap.add_argument("--config", default="configs/stage1_cpu.py")
@@ -120,7 +114,7 @@ def main(argv=None) -> None:
         raise SystemExit(f"error: --episodes={args.episodes} must be >= 1")
     from foottof.ppo.run_dir import with_run_network
 
-    cfg = with_run_network(_load_config(args.config), args.run_dir)
+    cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     print(format_table(*run(cfg, args.run_dir, args.episodes, args.seed)))
 

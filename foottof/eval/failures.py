@@ -114,9 +114,14 @@ def main(argv=None) -> None:
         raise SystemExit(f"error: --episodes={args.episodes} must be >= 1")
     from foottof.ppo.run_dir import with_run_network
 
+    from foottof.ppo.checkpoint import CheckpointUnreadable
+
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
-    print(format_table(*run(cfg, args.run_dir, args.episodes, args.seed)))
+    try:
+        print(format_table(*run(cfg, args.run_dir, args.episodes, args.seed)))
+    except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:
+        raise SystemExit(f"error: {e}") from None
 
 
 if __name__ == "__main__":

@@ -112,9 +112,8 @@ def main(argv=None) -> None:
         raise SystemExit(f"error: --difficulty_fraction={args.difficulty_fraction} outside [0, 1]")
     if args.episodes < 1:
         raise SystemExit(f"error: --episodes={args.episodes} must be >= 1")
-    from foottof.ppo.run_dir import with_run_network
-
     from foottof.ppo.checkpoint import CheckpointUnreadable
+    from foottof.ppo.run_dir import with_run_network
 
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction

@@ -116,6 +116,11 @@ class CheckpointMismatch(ValueError):
     """A readable checkpoint whose leaves do not fit the model (names the leaf and shapes)."""
 
 
+def _sha256(path: str) -> str:
+    with open(path, "rb") as fh:
+        return hashlib.sha256(fh.read()).hexdigest()
+
+
 def _file_digests(step_dir: str) -> dict[str, list]:
     out = {}
     for root, _, files in os.walk(step_dir):
@@ -124,8 +129,7 @@ def _file_digests(step_dir: str) -> dict[str, list]:
             rel = os.path.relpath(path, step_dir)
             if rel in (INTEGRITY_FILE, INTEGRITY_FILE + ".tmp"):
                 continue
-            with open(path, "rb") as fh:
-                out[rel] = [os.path.getsize(path), hashlib.sha256(fh.read()).hexdigest()]
+            out[rel] = [os.path.getsize(path), _sha256(path)]
     return out
 
 
@@ -158,9 +162,8 @@ def integrity_problem(step_dir: str) -> str | None:
         actual = os.path.getsize(path)
         if actual != size:
             return f"file {rel} has {actual} bytes, {size} were written (truncated or partial copy)"
-        with open(path, "rb") as fh:
-            if hashlib.sha256(fh.read()).hexdigest() != digest:
-                return f"file {rel} differs from what was written (corrupted)"
+        if _sha256(path) != digest:
+            return f"file {rel} differs from what was written (corrupted)"
     return None
 
 
@@ -172,9 +175,8 @@ def _quiet_failed_reads():
     previous = sys.unraisablehook
 
     def hook(unraisable):
-        if "orbax" not in getattr(unraisable.object, "__qualname__", "") and not str(
-            getattr(unraisable.object, "cr_code", "")
-        ).count("orbax"):
+        code = getattr(unraisable.object, "cr_code", None)  # a coroutine's code object
+        if "orbax" not in getattr(code, "co_filename", ""):
             previous(unraisable)
 
     sys.unraisablehook = hook

@@ -257,7 +257,7 @@ def _segments(
     u: jax.Array, gaps: jax.Array, lengths: jax.Array, half_cell: float
 ) -> tuple[jax.Array, jax.Array]:
     """Alternating (gap k, solid k) segments laid from u = 0: (index of the nearest solid
-    segment, -1 before the first; u is in a gap).
+    segment, -1 before the first; u is in a gap; index k of the (gap k, solid k) pair u is in).
 
     A vertex counts as in a gap only if it lies more than ``half_cell`` inside it (see
     Rendering at the top of this module).
@@ -274,7 +274,7 @@ def _segments(
     rel = u - starts[k]
     in_gap = jp.abs(rel - gaps[k] / 2) < gaps[k] / 2 - half_cell
     # A solid vertex in the first half of gap k belongs to solid k - 1 (-1: before the first).
-    return jp.where(rel < gaps[k] / 2, k - 1, k), in_gap
+    return jp.where(rel < gaps[k] / 2, k - 1, k), in_gap, k
 
 
 def _drawn_solid(offset: jax.Array, extent: jax.Array, spec: TileSpec) -> jax.Array:
@@ -410,11 +410,9 @@ def _platform_gap(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     gaps = gap * jax.random.uniform(k_g, (n,), minval=0.85, maxval=1.0)
     lengths = jax.random.uniform(k_l, (n,), minval=len_lo, maxval=len_hi)
     top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
-    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
+    k, in_gap, g = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
     z = jp.where(k >= 0, top[jp.maximum(k, 0)], 0.0)  # before the first platform: start level
-    # Platform k - 1's top; a pit vertex lies in gap k (its nearest solid is k - 1 or k).
-    starts = jp.concatenate([jp.zeros((1,)), jp.cumsum(gaps + lengths)[:-1]])
-    g = jp.clip(jp.searchsorted(starts, x - spec.course_x0_m, side="right") - 1, 0, n - 1)
+    # A pit vertex lies in gap g, between platforms g - 1 (the start platform for g = 0) and g.
     lower = jp.minimum(jp.where(g > 0, top[jp.maximum(g - 1, 0)], 0.0), top[g])
     z = jp.where(in_gap, lower, z)  # a crack dips below the lower of its two platforms
     return _finish(z, spec, pit_in_course=in_gap, gap_width_m=gaps[g])
@@ -466,7 +464,7 @@ def _beam(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     lengths = jax.random.uniform(k_l, (n,), minval=0.8, maxval=1.6)  # segment length [m]
     top = jax.random.uniform(k_z, (n,), minval=-0.5, maxval=0.5) * dz  # ~ U(+-dz/2)
     yc = (spec.ny - 1) * spec.cell_m / 2 + jax.random.uniform(k_y, (n,), minval=-1.0) * offset
-    k, in_gap = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
+    k, in_gap, _ = _segments(x - spec.course_x0_m, gaps, lengths, spec.cell_m / 2)
     k = jp.maximum(k, 0)  # gap 0 is empty: nothing lies before the first segment
     on_beam = ~in_gap & _drawn_solid(y - yc[k], width, spec)
     return _finish(top[k], spec, pit_in_course=~on_beam)

@@ -286,18 +286,18 @@ class Checkpointer:
             try:
                 restored = self._restore_step(target, s)
             except CheckpointUnreadable as e:
-                problems.append(f"{s}: {e}")
+                problems.append((s, str(e)))
                 if step is None:
                     print(f"[checkpoint] WARNING: skipping checkpoint {e}")
                 continue
             if problems and step is None:
-                self._move_aside([int(p.split(":", 1)[0]) for p in problems])
+                self._move_aside([step_ for step_, _ in problems])
             return restored
         if step is not None:
-            raise CheckpointUnreadable(problems[0].split(": ", 1)[1])
+            raise CheckpointUnreadable(problems[0][1])
         raise CheckpointUnreadable(
             f"no readable checkpoint in {os.path.dirname(self.directory)} (tried "
-            f"{', '.join(str(s) for s in steps)}; newest: {problems[0].split(': ', 1)[1]})"
+            f"{', '.join(str(s) for s in steps)}; newest: {problems[0][1]})"
         )
 
     def _move_aside(self, steps: list[int]) -> None:

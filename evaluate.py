@@ -17,6 +17,13 @@ import sys
 from absl import app, flags, logging
 from ml_collections import config_flags
 
+from foottof.renames import old_override  # imports no JAX
+
+# A renamed field (e.g. --config.reward.stall_speed_ms): one line with its new name. Checked before
+# DEFINE_config_file, which applies the --config.* overrides as it is defined.
+if __name__ == "__main__" and (_MESSAGE := old_override(sys.argv[1:])):
+    sys.exit(_MESSAGE)
+
 _CONFIG = config_flags.DEFINE_config_file(
     "config", "configs/base.py", "Config file (configs/*.py)."
 )

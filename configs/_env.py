@@ -83,7 +83,7 @@ def _add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     r.kd_scale_range = (0.9, 1.1)  # damping multiplier ~ U(range) [-]
     r.joint_pos_noise_rad = 0.01  # joint position noise std ~ U[0, this] per episode [rad]
     r.joint_vel_noise_rads = 0.5  # joint velocity noise std ~ U[0, this] per episode [rad/s]
-    r.push_vel_ms = 0.5  # push: base velocity change ~ U(+-this) per horizontal axis [m/s]
+    r.push_vel_mps = 0.5  # push: base velocity change ~ U(+-this) per horizontal axis [m/s]
     r.joint_offset_rad = 0.0  # static offset on all joint readings (evaluation only) [rad]
     r.odometry_level = 1.0  # odometry noise as a multiple of the 100% level [-]
     e.randomization = r

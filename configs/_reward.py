@@ -6,8 +6,8 @@ import ml_collections
 def get_section() -> ml_collections.ConfigDict:
     r = ml_collections.ConfigDict()
     r.success_radius_m = 0.5  # ending within this distance of the goal is a success [m]
-    r.guidance_max_speed_ms = 1.0  # dense guidance saturates at this speed toward the goal [m/s]
-    r.stall_speed_ms = 0.1  # below this speed while far from the goal counts as stalling [m/s]
+    r.guidance_max_speed_mps = 1.0  # dense guidance saturates at this speed toward the goal [m/s]
+    r.stall_speed_mps = 0.1  # below this speed while far from the goal counts as stalling [m/s]
     r.stall_grace_s = 2.0  # no stall penalty during the first seconds of an episode [s]
     r.jump_grace_s = 0.2  # no jump penalty while the spawn drop lands [s]
     r.edge_radius_m = 0.04  # foot_edge: terrain sampled this far from the foot centre [m]
@@ -16,7 +16,7 @@ def get_section() -> ml_collections.ConfigDict:
     s = ml_collections.ConfigDict()
     s.reach = 10.0  # sparse: +1 at the last step if within success_radius_m of the goal
     s.guidance = (
-        5.0  # dense: base velocity toward the goal, clipped at guidance_max_speed_ms [per s]
+        5.0  # dense: base velocity toward the goal, clipped at guidance_max_speed_mps [per s]
     )
     s.termination = (
         -1.0

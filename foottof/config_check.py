@@ -242,13 +242,13 @@ RULES = {
     "env.randomization.kd_scale_range": _range(0.0),
     "env.randomization.joint_pos_noise_rad": _nonneg,
     "env.randomization.joint_vel_noise_rads": _nonneg,
-    "env.randomization.push_vel_ms": _nonneg,
+    "env.randomization.push_vel_mps": _nonneg,
     "env.randomization.joint_offset_rad": _num(*LEVEL_RANGES["joint_offset"]),
     "env.randomization.odometry_level": _num(*LEVEL_RANGES["odometry"]),
     # reward
     "reward.success_radius_m": _pos,
-    "reward.guidance_max_speed_ms": _pos,
-    "reward.stall_speed_ms": _nonneg,
+    "reward.guidance_max_speed_mps": _pos,
+    "reward.stall_speed_mps": _nonneg,
     "reward.stall_grace_s": _nonneg,
     "reward.jump_grace_s": _nonneg,
     "reward.edge_radius_m": _pos,
@@ -365,9 +365,73 @@ def _check_ppo_cross(p) -> None:
         )
 
 
+def _check_sensor_cross(s, prefix: str = "sensor") -> None:
+    """Checks between fields of c.sensor (rate per grid, resolution within the range)."""
+    max_hz = TOF_MAX_RATE_HZ[s.grid]
+    if s.rate_hz > max_hz:
+        _fail(
+            f"{prefix}.rate_hz",
+            s.rate_hz,
+            f"must be in (0, {max_hz:g}] for a {s.grid}x{s.grid} grid",
+        )
+    if s.resolution_m > s.max_range_m:
+        _fail(
+            f"{prefix}.resolution_m",
+            s.resolution_m,
+            f"must be <= {prefix}.max_range_m={s.max_range_m:g}",
+        )
+
+
+def _check_noise_stage_cross(n, prefix: str) -> None:
+    """Checks between fields of c.noise.stage1 / stage2 (the delay range's order)."""
+    if n.min_delay_steps > n.max_delay_steps:
+        _fail(
+            f"{prefix}.min_delay_steps",
+            n.min_delay_steps,
+            f"must be <= {prefix}.max_delay_steps={n.max_delay_steps}",
+        )
+
+
+# Cross-field checks of one section by its path, with the fields they read (check_fields runs
+# them after the RULES when it is given all of those fields).
+_SECTION_CROSS = {
+    "sensor": (("grid", "rate_hz", "max_range_m", "resolution_m"), _check_sensor_cross),
+    **{
+        f"noise.stage{s}": (
+            ("min_delay_steps", "max_delay_steps"),
+            lambda n, p=f"noise.stage{s}": _check_noise_stage_cross(n, p),
+        )
+        for s in (1, 2)
+    },
+}
+
+
+def check_fields(section: str, values) -> None:
+    """The RULES and cross-field checks of one config section for the fields in ``values`` (a
+    mapping or ConfigDict of that section, e.g. section 'sensor' or 'noise.stage1').
+
+    The specs built from a config section (foottof.sensors.tof.ToFSpec,
+    foottof.sensors.degradation.DegradationBounds) check their fields with it, so each rule lives
+    once, here, whether a spec comes from a config or is built in code.
+
+    Raises:
+      ConfigError (a ValueError): '<section>.<field>=<value>: <valid range>'.
+    """
+    values = dict(values)
+    for name, value in values.items():
+        check = RULES.get(f"{section}.{name}")
+        why = check(value) if check is not None else None
+        if why:
+            _fail(f"{section}.{name}", value, why)
+    fields, cross = _SECTION_CROSS.get(section, ((), None))
+    if cross is not None and all(f in values for f in fields):
+        cross(ml_collections.ConfigDict({f: values[f] for f in fields}))
+
+
 def _check_cross(c) -> None:
     """Checks between fields (divisibility, ordering, lengths)."""
     _check_ppo_cross(c.ppo)
+    _check_sensor_cross(c.sensor)
     t = c.terrain
     if t.up_progress_frac < t.down_progress_frac:
         _fail(
@@ -386,13 +450,7 @@ def _check_cross(c) -> None:
                 dict(t[f"stage{s}_difficulty"]),
                 f"needs a (low, high) range for {missing}",
             )
-        n = c.noise[f"stage{s}"]
-        if n.min_delay_steps > n.max_delay_steps:
-            _fail(
-                f"noise.stage{s}.min_delay_steps",
-                n.min_delay_steps,
-                f"must be <= noise.stage{s}.max_delay_steps={n.max_delay_steps}",
-            )
+        _check_noise_stage_cross(c.noise[f"stage{s}"], f"noise.stage{s}")
     for name in ("tile_length_m", "tile_width_m", "platform_length_m", "goal_length_m"):
         cells = t[name] / t.cell_m
         if abs(cells - round(cells)) > 1e-6:
@@ -407,17 +465,6 @@ def _check_cross(c) -> None:
     if t.pit_z_m + t.z_range_m < 1.0:
         _fail("terrain.z_range_m", t.z_range_m, f"must be >= 1 - pit_z_m = {1.0 - t.pit_z_m:g}")
     s = c.sensor
-    max_hz = TOF_MAX_RATE_HZ[s.grid]
-    if s.rate_hz > max_hz:
-        _fail(
-            "sensor.rate_hz", s.rate_hz, f"must be in (0, {max_hz:g}] for a {s.grid}x{s.grid} grid"
-        )
-    if s.resolution_m > s.max_range_m:
-        _fail(
-            "sensor.resolution_m",
-            s.resolution_m,
-            f"must be <= sensor.max_range_m={s.max_range_m:g}",
-        )
     n_sensors = len(s.sites)
     for name, width in (("tilt_x_deg", None), ("tilt_y_deg", None), ("offset_m", 3)):
         v = s.get(name)

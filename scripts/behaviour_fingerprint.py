@@ -3,7 +3,7 @@ changed no behaviour: run before and after, compare the printed lines.
 
     python scripts/behaviour_fingerprint.py   # ~2-3 min on 2 cores
 
-Prints one digest for a 50-step rollout of the stage-1 env (configs/stage1_cpu.py, 8 envs,
+Prints one digest (and one of the values alone) for a 50-step rollout of the stage-1 env (configs/stage1_cpu.py, 8 envs,
 actions ~ N(0, 1) from a fixed key: observations, rewards, dones, metrics, physics state) and one
 for one training iteration (the resulting TrainState and metrics, 8 envs x 8 steps).
 """
@@ -23,12 +23,19 @@ from foottof.envs import make_env, make_training_env  # noqa: E402
 from foottof.ppo import train as train_lib  # noqa: E402
 
 
-def digest(tree) -> str:
+def digest(tree, names: bool = True) -> str:
+    """Digest of every leaf's bytes, in tree order, with (names=True) or without its key path
+    (names=False: a rename that keeps the keys' order, e.g. foottof.renames, keeps the digest)."""
     h = hashlib.sha256()
     for path, leaf in jax.tree_util.tree_flatten_with_path(jax.device_get(tree))[0]:
-        h.update(jax.tree_util.keystr(path).encode())
+        if names:
+            h.update(jax.tree_util.keystr(path).encode())
         h.update(np.ascontiguousarray(np.asarray(leaf)).tobytes())
     return h.hexdigest()[:16]
+
+
+def line(what: str, tree) -> str:
+    return f"{what}: {digest(tree)} (values only: {digest(tree, names=False)})"
 
 
 def main() -> None:
@@ -42,11 +49,11 @@ def main() -> None:
     for k in jax.random.split(jax.random.PRNGKey(1), 50):
         state = step(state, jax.random.normal(k, (n, 12)))
         outs.append((state.obs, state.reward, state.done, state.metrics, state.pipeline_state))
-    print(f"env rollout (50 steps x {n} envs): {digest(outs)}")
+    print(line(f"env rollout (50 steps x {n} envs)", outs))
     trainer = train_lib.make_train(make_training_env(cfg), cfg)
     ts = trainer.init(jax.random.PRNGKey(0))
     ts, metrics = trainer.iteration(ts)
-    print(f"one training iteration: {digest((ts, metrics))}")
+    print(line("one training iteration", (ts, metrics)))
 
 
 if __name__ == "__main__":

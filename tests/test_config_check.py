@@ -106,9 +106,51 @@ def test_allowed_values_live_once():
     assert train.LR_SCHEDULES is limits.LR_SCHEDULES is cc.LR_SCHEDULES
     assert networks.POLICIES is limits.POLICIES is cc.POLICIES
     assert tuple(networks.ACTIVATIONS) == limits.ACTIVATIONS == cc.ACTIVATIONS
-    assert tof.MAX_RATE_HZ is limits.TOF_MAX_RATE_HZ is cc.TOF_MAX_RATE_HZ
     assert tof.TILT_LIMIT_DEG is limits.TILT_LIMIT_DEG is cc.TILT_LIMIT_DEG
     assert robustness.LEVEL_RANGES is limits.LEVEL_RANGES is cc.LEVEL_RANGES
+
+
+@pytest.mark.parametrize(
+    "field, value",
+    [
+        ("max_range_m", -1.0),
+        ("max_range_m", 0.0),
+        ("resolution_m", 2.0),
+        ("fov_deg", 180.0),
+        ("grid", 6),
+        ("rate_hz", 61.0),
+    ],
+)
+def test_a_tof_rule_lives_once(field, value):
+    """A bad sensor value gives the same one line from the whole-config check and from a ToFSpec
+    built in code: both run config_check's rule (no second copy in foottof.sensors.tof)."""
+    from foottof.sensors import tof
+
+    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg.sensor[field] = value
+    with pytest.raises(cc.ConfigError) as from_config:
+        cc.check_config(cfg)
+    with pytest.raises(ValueError) as from_spec:
+        tof.ToFSpec(**{field: value})
+    assert str(from_spec.value) == str(from_config.value)
+    assert str(from_config.value).startswith(f"sensor.{field}={value!r}: must")
+
+
+@pytest.mark.parametrize(
+    "field, value", [("missing_rate", 1.5), ("gaussian_m", -0.1), ("min_delay_steps", 9)]
+)
+def test_a_noise_stage_rule_lives_once(field, value):
+    """Likewise for noise.stage*: DegradationBounds.from_config runs config_check's rules."""
+    from foottof.sensors.degradation import DegradationBounds
+
+    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg.noise.stage2[field] = value
+    with pytest.raises(cc.ConfigError) as from_config:
+        cc.check_config(cfg)
+    with pytest.raises(ValueError) as from_bounds:
+        DegradationBounds.from_config(cfg.noise, 2)
+    assert str(from_bounds.value) == str(from_config.value)
+    assert str(from_config.value).startswith(f"noise.stage2.{field}={value!r}: must")
 
 
 def test_check_imports_no_jax():

@@ -43,7 +43,7 @@ def test_write_curve_files_and_missing_columns(tmp_path):
     assert float(out[-1]["train/episode_return"]) == pytest.approx(9.0)
     assert float(out[-1]["episode/success"]) == pytest.approx(1 / 3, abs=1e-5)
     assert math.isnan(float(out[0]["episode/success"]))  # no episode data yet
-    assert math.isnan(float(out[-1]["task/speed_ms"]))  # column not logged by this run
+    assert math.isnan(float(out[-1]["task/speed_mps"]))  # column not logged by this run
 
 
 def test_missing_run_is_a_clear_error(tmp_path):

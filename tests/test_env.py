@@ -243,7 +243,7 @@ def test_reward_terms_hand_checked():
     rcfg = _cfg().reward
     # Guidance: goal at (3, 4) -> direction (0.6, 0.8); v = (1, 0) -> 0.6 m/s toward the goal.
     assert _terms(base_lin_vel=jp.array([1.0, 0.0, 0.0]))["guidance"] == pytest.approx(0.6)
-    # ... clipped at guidance_max_speed_ms (1.0): v = (3, 4) -> 5 m/s toward -> 1.0
+    # ... clipped at guidance_max_speed_mps (1.0): v = (3, 4) -> 5 m/s toward -> 1.0
     assert _terms(base_lin_vel=jp.array([3.0, 4.0, 0.0]))["guidance"] == pytest.approx(1.0)
     # Torques: 12 joints at 2 N m -> 12 * 4 = 48.
     assert _terms(torques=jp.full(12, 2.0))["torques"] == pytest.approx(48.0)

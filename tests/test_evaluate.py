@@ -52,7 +52,7 @@ def test_first_episode_outcomes_hand_checked():
     np.testing.assert_array_equal(out["failed"], [True, False, False, False])
     np.testing.assert_array_equal(out["length"], [2, 5, 4, 5])
     # env0: mean(0, 4) = 2; env1: mean(1,5,9,13,17) = 9; env2: mean(2,6,10,14) = 8
-    np.testing.assert_allclose(out["mean_speed_ms"], [2.0, 9.0, 8.0, 9.0 + 2.0])
+    np.testing.assert_allclose(out["mean_speed_mps"], [2.0, 9.0, 8.0, 9.0 + 2.0])
     row = results.summarize("tof", "none", 0.0, out)
     assert (row["episodes"], row["successes"], row["falls"]) == (4, 1, 1)
     assert row["success_rate"] == 0.25
@@ -68,7 +68,7 @@ def test_first_episode_outcomes_random_property():
         for j in range(b):
             idx = np.flatnonzero(done[:, j])
             assert out["success"][j] == (bool(success[idx[0], j]) if idx.size else False)
-        np.testing.assert_allclose(out["mean_speed_ms"], 1.0)
+        np.testing.assert_allclose(out["mean_speed_mps"], 1.0)
 
 
 def test_wilson_interval_hand_computed():
@@ -105,7 +105,7 @@ def _episodes_doc(success, failed, seed=0, fingerprint="f"):
         "finished": [1] * n,
         "length": [9] * n,
     }
-    cell["mean_speed_ms"] = [0.5] * n
+    cell["mean_speed_mps"] = [0.5] * n
     draws = {"seed": seed, "num_envs": n, "episodes": n, "fingerprint": fingerprint}
     return {"schema_version": 1, "checkpoint": "x", "draws": draws, "cells": [cell]}
 
@@ -184,7 +184,7 @@ def _row(source, perturbation, level, k, n=10):
     return {
         "source": source, "perturbation": perturbation, "level": level, "episodes": n,
         "successes": k, "success_rate": k / n, "ci_low": lo, "ci_high": hi,
-        "mean_speed_ms": 0.5, "falls": 1,
+        "mean_speed_mps": 0.5, "falls": 1,
     }  # fmt: skip
 
 
@@ -205,7 +205,7 @@ def test_ensemble_is_recorded_and_captioned():
     assert e["difficulty_fraction"] == 0.125 and e["deterministic"] is True
     assert e["fingerprint"] == results.draws_fingerprint(cfg)
     doc = results.results_document([_row("tof", "odometry", 0.0, 5)], None, 10.0, e)
-    assert doc["schema_version"] == 2 and doc["ensemble"] == e
+    assert doc["schema_version"] == 3 and doc["ensemble"] == e
     rows = [_row("tof", "odometry", 0.0, 5, n=200), _row("tof", "odometry", 2.0, 3, n=200)]
     assert results.ensemble_caption(e, rows) == (
         "ensemble: 80 % stepping stones + 20 % gaps at 12.5 % of the stage-1 difficulty range, "
@@ -253,6 +253,17 @@ def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
     rows, _, left_out = drawn[-1]
     assert [r["source"] for r in rows] == ["mock_aggre"]
     assert left_out == ["results_tof_joint_offset.json", "results_tof_odometry.json"]
+    legacy = json.loads((tmp_path / "results_mock_aggre_odometry.json").read_text())
+    legacy["schema_version"] = 2  # written before mean_speed_ms became mean_speed_mps: drawn
+    legacy["results"] = [
+        {("mean_speed_ms" if k == "mean_speed_mps" else k): v for k, v in r.items()}
+        for r in legacy["results"]
+    ]
+    (tmp_path / "results_mock_aggre_odometry.json").write_text(json.dumps(legacy))
+    write("tof", "odometry", easy)
+    rows, _, _ = drawn[-1]
+    assert sorted(r["source"] for r in rows) == ["mock_aggre", "tof"]
+    assert all("mean_speed_mps" in r for r in rows)
 
 
 def test_robustness_png_with_caption_and_left_out_files():
@@ -322,7 +333,7 @@ class _Task(NamedTuple):  # the part of the env's task state the rollout reads
 
 class _ConstantObsEnv:
     """Single env whose observation is always zero and whose episodes last 4 steps; at the last
-    step 'episode/speed_ms' reads the first action component (what the rollout acted)."""
+    step 'episode/speed_mps' reads the first action component (what the rollout acted)."""
 
     action_size = 2
     observation_size = 3
@@ -331,14 +342,14 @@ class _ConstantObsEnv:
         from brax.envs.base import State
 
         z = jp.zeros(())
-        metrics = {"episode/success": z, "episode/failed": z, "episode/speed_ms": z}
+        metrics = {"episode/success": z, "episode/failed": z, "episode/speed_mps": z}
         info = {"t": jp.zeros((), jp.int32), "task": _Task(jp.int32(3))}
         return State(None, jp.zeros(3), z, z, metrics, info)
 
     def step(self, state, action):
         t = state.info["t"] + 1
         done = t >= 4
-        metrics = dict(state.metrics, **{"episode/speed_ms": jp.where(done, action[0], 0.0)})
+        metrics = dict(state.metrics, **{"episode/speed_mps": jp.where(done, action[0], 0.0)})
         info = {"t": jp.where(done, 0, t), "task": state.info["task"]}
         return state.replace(done=done.astype(jp.float32), metrics=metrics, info=info)
 
@@ -412,14 +423,14 @@ def test_end_to_end_writes_outputs(e2e):
     with open(paths["json"]) as f:
         doc = json.load(f)
     assert tuple(doc) == results.TOP_KEYS  # schema: exact key sets
-    assert doc["schema_version"] == 2 and doc["ensemble"] == results.ensemble_setting(cfg)
+    assert doc["schema_version"] == 3 and doc["ensemble"] == results.ensemble_setting(cfg)
     assert len(doc["results"]) == 2
     for r, level in zip(doc["results"], (0.0, 2.0), strict=True):
         assert tuple(r) == results.RESULT_KEYS
         assert (r["source"], r["perturbation"], r["level"]) == ("mock_ideal", "odometry", level)
         assert r["episodes"] == 4 and 0 <= r["successes"] <= 4 and 0 <= r["falls"] <= 4
         assert r["ci_low"] <= r["success_rate"] <= r["ci_high"]
-        assert math.isfinite(r["mean_speed_ms"]) and r["mean_speed_ms"] >= 0
+        assert math.isfinite(r["mean_speed_mps"]) and r["mean_speed_mps"] >= 0
     with open(paths["csv"]) as f:
         csv_rows = list(csv.DictReader(f))
     assert tuple(csv_rows[0]) == results.RESULT_KEYS and [int(r["episodes"]) for r in csv_rows] == [
@@ -442,7 +453,7 @@ def test_per_episode_outcomes_match_the_rows_and_pair_with_themselves(e2e, tmp_p
     for cell, row in zip(doc["cells"], rows, strict=True):
         assert all(len(cell[k]) == 4 for k in results.EPISODE_KEYS)
         assert sum(cell["success"]) == row["successes"] and sum(cell["failed"]) == row["falls"]
-        assert np.mean(cell["mean_speed_ms"]) == pytest.approx(row["mean_speed_ms"], abs=1e-3)
+        assert np.mean(cell["mean_speed_mps"]) == pytest.approx(row["mean_speed_mps"], abs=1e-3)
     terrains = [t for c in doc["cells"] for t in c["terrain"]]
     assert set(terrains) <= {"mixed_row_stones", "platform_gap"}
     assert doc["cells"][0]["terrain"] == doc["cells"][1]["terrain"]  # same draws at each level

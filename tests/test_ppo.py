@@ -257,6 +257,29 @@ def test_checkpoint_without_a_new_env_metric_restores_by_leaf_name(tmp_path, tra
     checkpointer.close()
 
 
+def test_checkpoint_with_a_renamed_env_metric_restores_without_it(tmp_path, trained_once):
+    """A checkpoint written by code whose env had a metric this code renamed or removed (e.g.
+    'episode/speed_ms' -> 'episode/speed_mps', foottof.renames) resumes: the old leaf is left
+    unread and every other leaf comes back; an extra leaf outside the metrics is still an error."""
+    trainer, state = trained_once
+    es = state.env_state
+    old = jp.full_like(es.metrics["reward/recall"], 3.0)
+    with_old = state.replace(env_state=es.replace(metrics={**es.metrics, "episode/aaa_ms": old}))
+    checkpointer = ckpt.Checkpointer(str(tmp_path / "metrics"))
+    checkpointer.save(with_old)
+    restored, with_rollout = checkpointer.restore(trainer.init(jax.random.PRNGKey(1)))
+    checkpointer.close()
+    assert with_rollout and "episode/aaa_ms" not in restored.env_state.metrics
+    assert tree_equal(jax.device_get(state), jax.device_get(restored))
+
+    with_info = state.replace(env_state=es.replace(info={**es.info, "aaa": old}))
+    checkpointer = ckpt.Checkpointer(str(tmp_path / "info"))
+    checkpointer.save(with_info)
+    with pytest.raises(ValueError, match=r"\['env_state'\].info\['aaa'\].*not in this model"):
+        checkpointer.restore(trainer.init(jax.random.PRNGKey(1)))
+    checkpointer.close()
+
+
 def test_resume_equals_straight_run(tmp_path, capsys):
     env = MEMORY_ENV
     straight = runner.run(tiny_cfg(num_iterations=4), env, str(tmp_path / "a"))

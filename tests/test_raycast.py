@@ -195,12 +195,12 @@ def test_ray_max_range_and_miss(oracle):
     assert t_far[1] == MISS  # pointing up into the sky
     assert t_far[2] == pytest.approx(1.0 - z, abs=1e-5)  # direction normalized
     assert t_far[3] == pytest.approx(0.05, abs=1e-5)  # inside the base box: exits its top face
-    # From 3 m + 1 mm above the surface the hit lies beyond max_range (3 m), from 3 m - 1 mm not.
+    # From 3 m + 1 mm above the surface the hit lies beyond max_range_m (3 m), from 3 m - 1 mm not.
     o_far = o.at[0, 2].set(z + 3.001).at[2, 2].set(z + 2.999)
     t_short = cast(o_far, d)  # same shapes: no recompilation
     assert t_short[0] == MISS
     assert t_short[2] == pytest.approx(2.999, abs=1e-4)
-    with pytest.raises(ValueError, match="max_range"):
+    with pytest.raises(ValueError, match="max_range_m"):
         ray_heightfield(hf, o, d, -1.0)
     with pytest.raises(ValueError, match="shape"):
         ray_heightfield(hf, o[:, :2], d[:, :2], 1.0)

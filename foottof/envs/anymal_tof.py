@@ -41,9 +41,9 @@ EPISODE_METRICS = (
     "episode/goal_dist_m",
     "episode/progress",
     "curriculum/level",
-    "episode/speed_ms",
+    "episode/speed_mps",
 )
-STEP_METRICS = ("task/speed_ms", "task/feet_at_edges")  # averaged over all steps by the trainer
+STEP_METRICS = ("task/speed_mps", "task/feet_at_edges")  # averaged over all steps by the trainer
 
 
 @dataclasses.dataclass(frozen=True)
@@ -53,7 +53,7 @@ class TaskSpec:
 
     clip_actions: float
     randomize: bool
-    push_vel_ms: float
+    push_vel_mps: float
     kp: float
     kd: float
     max_joint_speed_rads: float
@@ -86,7 +86,7 @@ class TaskSpec:
         return cls(
             clip_actions=float(e.clip_actions),
             randomize=bool(e.randomization.enabled),
-            push_vel_ms=float(e.randomization.push_vel_ms),
+            push_vel_mps=float(e.randomization.push_vel_mps),
             kp=float(e.control.kp),
             kd=float(e.control.kd),
             max_joint_speed_rads=float(e.max_joint_speed_rads),
@@ -362,8 +362,8 @@ class AnymalToFEnv(Env):
                 "episode/goal_dist_m": dist,
                 "episode/progress": self._progress(task, d.qpos[0:2]),
                 "curriculum/level": task.level.astype(jp.float32),
-                "episode/speed_ms": speed,
-                "task/speed_ms": speed,
+                "episode/speed_mps": speed,
+                "task/speed_mps": speed,
                 "task/feet_at_edges": jp.sum(kin.foot_edge),
             }
         )
@@ -397,7 +397,7 @@ class AnymalToFEnv(Env):
         # Push: add a random horizontal base velocity every push interval.
         push_now = (task.step == p.push_step) & sp.randomize
         push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
-        push = push * sp.push_vel_ms * push_now
+        push = push * sp.push_vel_mps * push_now
         d = d.replace(qvel=d.qvel.at[0:2].add(push))
         kp = sp.kp * p.kp_scale * p.motor_strength
         kd = sp.kd * p.kd_scale * p.motor_strength

@@ -115,11 +115,11 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
     at_goal = (dist < rcfg.success_radius_m).astype(jp.float32)
     to_goal = (x.goal_xy - x.base_pos[:2]) / jp.maximum(dist, 1e-6)
     v_toward = jp.dot(x.base_lin_vel[:2], to_goal)
-    vmax = rcfg.guidance_max_speed_ms
+    vmax = rcfg.guidance_max_speed_mps
     # Dense guidance: speed toward the goal (clipped); full credit once within the success radius.
     guidance = jp.where(at_goal > 0, vmax, jp.clip(v_toward, -vmax, vmax))
     speed = jp.linalg.norm(x.base_lin_vel[:2])
-    stalling = (speed < rcfg.stall_speed_ms) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
+    stalling = (speed < rcfg.stall_speed_mps) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
     return {
         "reach": x.truncated * at_goal,

@@ -23,6 +23,7 @@ import json
 import math
 import os
 
+from foottof import renames
 from foottof.eval import results
 from foottof.lab.compare import parse_branch  # NAME=DIR, as the A/B tool of training runs
 
@@ -59,11 +60,14 @@ def load_episodes(path: str) -> dict:
     with open(path) as f:
         doc = json.load(f)
     version = doc.get("schema_version") if isinstance(doc, dict) else None
-    if version != results.EPISODES_SCHEMA_VERSION:
+    if version not in (1, results.EPISODES_SCHEMA_VERSION):
         raise ValueError(
-            f"{path}: episodes schema version {version!r}; this code reads "
+            f"{path}: episodes schema version {version!r}; this code reads 1 and "
             f"{results.EPISODES_SCHEMA_VERSION}"
         )
+    if version == 1:  # mean_speed_ms -> mean_speed_mps (foottof.renames)
+        doc = dict(doc, schema_version=results.EPISODES_SCHEMA_VERSION)
+        doc["cells"] = [renames.migrate_row(c) for c in doc["cells"]]
     return doc
 
 

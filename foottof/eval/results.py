@@ -12,7 +12,9 @@ import os
 
 import numpy as np
 
-SCHEMA_VERSION = 2  # 2: adds "ensemble" (what was evaluated: difficulty, stone share, actions)
+from foottof import renames
+
+SCHEMA_VERSION = 3  # 2: adds "ensemble" (difficulty, stone share, actions); 3: mean_speed_mps
 RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
     "source",
     "perturbation",
@@ -22,7 +24,7 @@ RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
     "success_rate",
     "ci_low",
     "ci_high",
-    "mean_speed_ms",
+    "mean_speed_mps",
     "falls",
 )
 TOP_KEYS = ("schema_version", "checkpoint", "episode_length_s", "ensemble", "results")
@@ -37,8 +39,8 @@ ENSEMBLE_KEYS = (  # exact key set of the "ensemble" entry (ensemble_setting)
 
 # Per-episode outcomes (episodes_<source>_<perturbation>.json), for paired comparisons of two
 # policies on the same episode draws (foottof.eval.paired).
-EPISODES_SCHEMA_VERSION = 1
-EPISODE_KEYS = ("terrain", "success", "failed", "finished", "length", "mean_speed_ms")  # (n,)
+EPISODES_SCHEMA_VERSION = 2  # 2: mean_speed_ms renamed mean_speed_mps (1 is read, migrated)
+EPISODE_KEYS = ("terrain", "success", "failed", "finished", "length", "mean_speed_mps")  # (n,)
 # Config sections that decide the episode draws (map, spawn/goal, sensor noise) and outcomes of an
 # evaluation; the policy's own sections (ppo, network, train) and the top-level training seed
 # do not. Leaves of c.eval that only choose what runs or where it goes are left out too.
@@ -83,7 +85,7 @@ def summarize(source: str, perturbation: str, level: float, outcomes: dict) -> d
         "success_rate": k / n if n else float("nan"),
         "ci_low": lo,
         "ci_high": hi,
-        "mean_speed_ms": float(np.mean(outcomes["mean_speed_ms"])) if n else float("nan"),
+        "mean_speed_mps": float(np.mean(outcomes["mean_speed_mps"])) if n else float("nan"),
         "falls": int(outcomes["failed"].sum()),
     }
 
@@ -186,7 +188,7 @@ def episodes_document(cells: list[tuple[dict, dict]], checkpoint: str | None, dr
                 raise ValueError(f"episode outcome {k!r} has shape {v.shape}; expected ({n},)")
             if k == "terrain":
                 cell[k] = [str(x) for x in v]
-            elif k == "mean_speed_ms":
+            elif k == "mean_speed_mps":
                 cell[k] = [round(float(x), 4) for x in v]
             else:
                 cell[k] = v.astype(int).tolist()
@@ -265,7 +267,7 @@ def format_table(rows: list[dict]) -> str:
         lines.append(
             f"{r['source']:<11}{r['perturbation']:<14}{r['level']:>7.3g}{r['episodes']:>9d}"
             f"{r['successes']:>9d}{r['success_rate']:>7.3f}  "
-            f"[{r['ci_low']:.3f},{r['ci_high']:.3f}]{r['mean_speed_ms']:>10.3f}{r['falls']:>7d}"
+            f"[{r['ci_low']:.3f},{r['ci_high']:.3f}]{r['mean_speed_mps']:>10.3f}{r['falls']:>7d}"
         )
     return "\n".join(lines)
 
@@ -321,7 +323,8 @@ def write_results(
         try:
             with open(p) as f:
                 other = json.load(f)
-            more = [r for r in other["results"] if tuple(r) == RESULT_KEYS]
+            more = [renames.migrate_row(r) for r in other["results"]]
+            more = [r for r in more if tuple(r) == RESULT_KEYS]
         except (OSError, ValueError, KeyError, TypeError):
             continue  # a foreign or damaged file: not plotted
         if other.get("ensemble") != doc["ensemble"]:

@@ -52,7 +52,7 @@ def first_episode_outcomes(
 
     Returns:
       dict of (B,) arrays: ``finished`` (bool, a done occurred), ``success`` (bool, at the first
-      done), ``failed`` (bool, at the first done), ``mean_speed_ms`` (mean speed over the steps up
+      done), ``failed`` (bool, at the first done), ``mean_speed_mps`` (mean speed over the steps up
       to and including the first done; over all T steps if none), ``length`` (steps of the first
       episode).
     """
@@ -72,7 +72,7 @@ def first_episode_outcomes(
         "finished": finished,
         "success": succ,
         "failed": fail,
-        "mean_speed_ms": mean_speed,
+        "mean_speed_mps": mean_speed,
         "length": length,
     }
 
@@ -160,7 +160,7 @@ def make_rollout(
                 state.done,
                 state.metrics["episode/success"],
                 state.metrics["episode/failed"],
-                state.metrics["episode/speed_ms"],
+                state.metrics["episode/speed_mps"],
             )
             return (state, carry, state.done > 0.5), out
 

@@ -28,7 +28,7 @@ COLUMNS = (
     ("episode/failed", "falls"),
     ("episode/success", "success"),
     ("episode/progress", "progress"),
-    ("episode/speed_ms", "speed [m/s]"),
+    ("episode/speed_mps", "speed [m/s]"),
     ("train/episode_return", "return"),
     ("ppo/action_std", "action std"),
 )

@@ -15,20 +15,23 @@ import os
 
 import numpy as np
 
+from foottof import renames
+
 # (column in metrics.csv, label of the curve). Per-episode means are over the episodes that ended
-# in the iteration; 'task/speed_ms' is the mean horizontal base speed over all steps.
+# in the iteration; 'task/speed_mps' is the mean horizontal base speed over all steps.
 CURVES = (
     ("episode/success", "success (episodes ending at the deadline within 0.5 m)"),
     ("episode/failed", "falls (failure terminations per ended episode)"),
     ("train/episode_return", "episode return"),
     ("train/episode_length", "episode length [steps]"),
     ("curriculum/level", "mean curriculum level"),
-    ("task/speed_ms", "mean horizontal speed [m/s]"),
+    ("task/speed_mps", "mean horizontal speed [m/s]"),
 )
 
 
 def read_metrics(path: str) -> dict[str, np.ndarray]:
-    """Columns of a metrics.csv as float arrays (empty cells and missing columns -> NaN)."""
+    """Columns of a metrics.csv as float arrays (empty cells and missing columns -> NaN; renamed
+    metric columns of older runs under their new names, foottof.renames.METRICS)."""
     if not os.path.exists(path):
         raise FileNotFoundError(f"{path!r} not found: is this a run directory of train.py?")
     with open(path, newline="") as f:
@@ -42,7 +45,7 @@ def read_metrics(path: str) -> dict[str, np.ndarray]:
         except (TypeError, ValueError):
             return math.nan
 
-    return {k: np.array([num(r.get(k)) for r in rows]) for k in rows[0]}
+    return {renames.METRICS.get(k, k): np.array([num(r.get(k)) for r in rows]) for k in rows[0]}
 
 
 def moving_average(x: np.ndarray, window: int) -> np.ndarray:

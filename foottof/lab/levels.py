@@ -17,6 +17,7 @@ import ml_collections
 import numpy as np
 import orbax.checkpoint as ocp
 
+from foottof import renames
 from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 from foottof.terrain.terrain_map import TERRAIN_TYPES, TerrainMapSpec
 
@@ -94,7 +95,7 @@ def level_counts(run_dir: str, step: int | None = None) -> dict[str, np.ndarray]
       all types add up to the run's number of envs.
     """
     with open(os.path.join(run_dir, "config.json")) as f:
-        cfg = ml_collections.ConfigDict(json.load(f))
+        cfg = ml_collections.ConfigDict(renames.migrate_config_dict(json.load(f)))
     spec = TerrainMapSpec.from_config(cfg.terrain, int(cfg.stage))
     leaves = read_rollout_leaves(run_dir, (LEVEL_LEAF, COL_LEAF), step)
     level, col = leaves[LEVEL_LEAF].reshape(-1), leaves[COL_LEAF].reshape(-1)

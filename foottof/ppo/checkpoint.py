@@ -60,7 +60,9 @@ def _flatten(tree: Any) -> tuple[dict, list]:
 
 # Per-step env metrics (reward terms, task metrics) are outputs of the last step, recomputed by
 # the next one and read by nothing else: a checkpoint written before a metric existed restores
-# with that leaf taken from the target (its fresh value), so new metrics do not break a resume.
+# with that leaf taken from the target (its fresh value), and one that holds a metric this code
+# no longer has (removed or renamed, foottof.renames.METRICS) restores without it, so metric
+# changes do not break a resume.
 RECOMPUTED_LEAF_PREFIX = "['env_state'].metrics["
 
 
@@ -80,17 +82,28 @@ def _saved_index(target: Any, saved_manifest: list | None) -> list[int | None]:
     return [index.get(n) for n in names]
 
 
-def _abstract(target: Any, saved_manifest: list | None = None) -> dict:
+def _abstract(target: Any, saved_manifest: list | None = None, with_extra: bool = False) -> dict:
     """Abstract arrays of the saved leaves, keyed as saved, shaped/sharded like `target`'s
-    (without a manifest: every non-empty leaf of `target`, numbered as _flatten does)."""
+    (without a manifest: every non-empty leaf of `target`, numbered as _flatten does).
+
+    with_extra: also the saved leaves `target` lacks (metrics of older code, which orbax must
+    read to restore the item; they are dropped by _unflatten), shaped as the manifest says."""
     leaves = jax.tree.leaves(target)
-    return {
+    out = {
         f"leaf_{j:04d}": jax.ShapeDtypeStruct(
             x.shape, x.dtype, sharding=getattr(x, "sharding", None)
         )
         for x, j in zip(leaves, _saved_index(target, saved_manifest), strict=True)
         if j is not None and np.size(x) > 0
     }
+    if with_extra and saved_manifest is not None:
+        by_shape = {np.shape(x): getattr(x, "sharding", None) for x in reversed(leaves)}
+        for j, (_, shape, dtype) in enumerate(saved_manifest):
+            key = f"leaf_{j:04d}"
+            if key not in out and int(np.prod(shape)) > 0:  # sharded as a target leaf its shape
+                sharding = by_shape.get(tuple(shape), next(iter(by_shape.values()), None))
+                out[key] = jax.ShapeDtypeStruct(tuple(shape), np.dtype(dtype), sharding=sharding)
+    return out
 
 
 def _unflatten(target: Any, flat: dict, saved_manifest: list | None = None) -> Any:
@@ -202,7 +215,8 @@ def _one_line(e: BaseException) -> str:
 
 def check_compatible(item: str, saved_manifest: list, target: Any, source: str) -> None:
     """Raises CheckpointMismatch naming the first leaf whose name or shape differs from `target`
-    (a per-step env metric the checkpoint lacks is no mismatch: RECOMPUTED_LEAF_PREFIX)."""
+    (a per-step env metric the checkpoint lacks or holds in excess is no mismatch:
+    RECOMPUTED_LEAF_PREFIX)."""
     _, expected = _flatten(jax.tree.map(lambda x: jax.ShapeDtypeStruct(x.shape, x.dtype), target))
     saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
     for name, shape, _ in expected:
@@ -216,6 +230,7 @@ def check_compatible(item: str, saved_manifest: list, target: Any, source: str) 
                 f"{tuple(shape)} in this model"
             )
     extra = sorted(set(saved) - {name for name, _, _ in expected})
+    extra = [n for n in extra if not n.startswith(RECOMPUTED_LEAF_PREFIX)]
     if extra:
         raise CheckpointMismatch(
             f"{source}: {item} leaf {extra[0]} is in the checkpoint but not in this model"
@@ -326,7 +341,10 @@ class Checkpointer:
         items = [i for i in ITEMS if i in manifest]
         for item in items:
             check_compatible(item, manifest[item], _sub(target, item), f"checkpoint {step}")
-        args = {i: ocp.args.StandardRestore(_abstract(_sub(target, i), manifest[i])) for i in items}
+        args = {
+            i: ocp.args.StandardRestore(_abstract(_sub(target, i), manifest[i], with_extra=True))
+            for i in items
+        }
         try:
             with _quiet_failed_reads():
                 restored = self._manager.restore(step, args=ocp.args.Composite(**args))

@@ -11,6 +11,7 @@ import jax
 import ml_collections
 import numpy as np
 
+from foottof import renames
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import run_dir as run_dirs
 from foottof.ppo import train as train_lib
@@ -140,7 +141,7 @@ def _write_config(cfg: ml_collections.ConfigDict, run_dir: str) -> None:
     text = cfg.to_json_best_effort(indent=2, sort_keys=True)
     if os.path.exists(path):
         with open(path) as f:
-            old = json.load(f)
+            old = renames.migrate_config_dict(json.load(f))
         new = json.loads(text)
         changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
         if changed:
@@ -173,7 +174,8 @@ def trim_metrics(run_dir: str, iteration: int) -> float:
     Rows logged after the last checkpoint of a killed run are dropped, so the resumed run's rows
     follow on without repeated iterations (in a file that already repeats iterations, from before
     this trim existed, the later rows win). A file written before the cumulative wall-clock
-    column existed gets it (summed from ``time/iteration_s``). Atomic rewrite.
+    column existed gets it (summed from ``time/iteration_s``); renamed metric columns get their
+    new names (foottof.renames.METRICS). Atomic rewrite.
 
     Returns:
       Cumulative wall-clock seconds of the run up to ``iteration`` (0.0 without a metrics.csv).
@@ -183,9 +185,12 @@ def trim_metrics(run_dir: str, iteration: int) -> float:
         return 0.0
     with open(path, newline="") as f:
         reader = csv.DictReader(f)
-        fields = list(reader.fieldnames or [])
+        fields = renames.migrate_columns(list(reader.fieldnames or []))
         rows = []
-        for r in reader:  # a row repeating an earlier iteration starts a resumed chunk: it wins
+        for r in reader:
+            r = {
+                renames.METRICS.get(k, k): v for k, v in r.items()
+            }  # a row repeating an earlier iteration starts a resumed chunk: it wins
             if not r.get("iteration"):
                 continue
             while rows and int(rows[-1]["iteration"]) >= int(r["iteration"]):

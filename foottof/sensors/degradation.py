@@ -6,6 +6,7 @@ import jax
 import jax.numpy as jp
 from flax import struct
 
+from foottof import config_check
 from foottof.sensors.noise_model import NoiseModel, missing_prob, noise_std
 from foottof.sensors.tof import ToFReading
 
@@ -43,27 +44,23 @@ class DegradationBounds:
         delay range), or None.
 
         Raises:
-          ValueError: unknown stage, negative bounds, missing_rate > 1, or a delay range outside
-            0 <= min <= max <= spec.delay_capacity_steps (the timing ring buffer; unchecked without
-            ``spec``).
+          ValueError: unknown stage; a field outside its range (foottof.config_check's rules for
+            noise.stage*: bounds >= 0, missing_rate <= 1, 0 <= min_delay <= max_delay); a
+            max_delay above spec.delay_capacity_steps (the timing ring buffer; unchecked
+            without ``spec``).
         """
         if stage not in (1, 2):
             raise ValueError(f"stage must be 1 or 2, got {stage!r}")
         c = noise_cfg[f"stage{stage}"]
+        names = (*_FIELDS, "min_delay_steps", "max_delay_steps")
+        config_check.check_fields(f"noise.stage{stage}", {f: c[f] for f in names})
         vals = {f: float(c[f]) for f in _FIELDS}
-        for f, v in vals.items():
-            if not v >= 0.0:
-                raise ValueError(f"noise.stage{stage}.{f} must be >= 0, got {v!r}")
-        if vals["missing_rate"] > 1.0:
-            raise ValueError(
-                f"noise.stage{stage}.missing_rate must be in [0, 1], got {vals['missing_rate']!r}"
-            )
         lo, hi = int(c.min_delay_steps), int(c.max_delay_steps)
         cap = spec.delay_capacity_steps if spec is not None else hi
-        if not 0 <= lo <= hi <= cap:
+        if hi > cap:
             raise ValueError(
-                f"noise.stage{stage} delay range [{lo}, {hi}] must satisfy 0 <= min <= max <= {cap} "
-                f"(ring-buffer capacity)"
+                f"noise.stage{stage}.max_delay_steps={hi}: the delay range [{lo}, {hi}] must "
+                f"end at or below the timing ring buffer's capacity, {cap} steps"
             )
         return cls(
             **{f: jp.float32(v) for f, v in vals.items()},

@@ -12,7 +12,7 @@ from jax.custom_batching import custom_vmap
 
 from foottof.terrain.heightfield import Heightfield
 
-MISS = -1.0  # distance returned for a miss or a hit beyond max_range (same sentinel as mj_ray)
+MISS = -1.0  # distance returned for a miss or a hit beyond max_range_m (same sentinel as mj_ray)
 _MINVAL = 1e-15  # MuJoCo's mjMINVAL: box faces with |direction component| below it are skipped
 
 
@@ -31,11 +31,11 @@ def _check_range(max_range_m) -> float:
         r = float(max_range_m)
     except (TypeError, jax.errors.ConcretizationTypeError) as e:
         raise ValueError(
-            f"max_range must be a static Python float > 0 [m] (it fixes the traced loop size), "
+            f"max_range_m must be a static Python float > 0 [m] (it fixes the traced loop size), "
             f"got {max_range_m!r}"
         ) from e
     if not (math.isfinite(r) and r > 0.0):
-        raise ValueError(f"max_range must be a finite float > 0 [m], got {max_range_m!r}")
+        raise ValueError(f"max_range_m must be a finite float > 0 [m], got {max_range_m!r}")
     return r
 
 
@@ -386,8 +386,8 @@ def _surface_fn(meta: Heightfield, r: float, n_strips: int):
     return surface
 
 
-def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool, adaptive=True):
-    r = _check_range(max_range)
+def _cast(hfield: Heightfield, origins, directions, max_range_m, with_normal: bool, adaptive=True):
+    r = _check_range(max_range_m)
     origins = jp.asarray(origins)
     directions = jp.asarray(directions)
     if origins.ndim != 2 or origins.shape[-1] != 3 or directions.shape != origins.shape:
@@ -415,7 +415,7 @@ def _cast(hfield: Heightfield, origins, directions, max_range, with_normal: bool
     return jp.where(hit, t, MISS), jp.where(hit[:, None], n, 0.0)
 
 
-def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) -> jax.Array:
+def ray_heightfield(hfield: Heightfield, origins, directions, max_range_m: float) -> jax.Array:
     """Distance along each ray to MuJoCo's heightfield surface, as ``mujoco.mj_ray`` computes it.
 
     The heightfield solid is MuJoCo's: the triangulated surface (each cell split along the
@@ -424,32 +424,32 @@ def ray_heightfield(hfield: Heightfield, origins, directions, max_range: float) 
     two-sided, so a ray starting below the surface hits the surface from underneath or exits
     through a wall/the base box, exactly as mj_ray does (a ray starting inside the base box
     returns the distance to where it leaves the box). Exact: every cell whose xy-footprint the
-    ray crosses within ``max_range`` is tested (strips of the dominant horizontal axis, at most
+    ray crosses within ``max_range_m`` is tested (strips of the dominant horizontal axis, at most
     2 cells per strip), so thin corners cannot be skipped. Assumes the hfield geom is not
     rotated (the ``Heightfield`` convention).
 
-    jit- and vmap-able; ``max_range`` is static (it sets the number of strips,
-    ``num_strips(hfield, max_range)``). Each ray walks the strips in order and stops at its first
+    jit- and vmap-able; ``max_range_m`` is static (it sets the number of strips,
+    ``num_strips(hfield, max_range_m)``). Each ray walks the strips in order and stops at its first
     hit: every ray walks the strips of the first of the ``ROUNDS``, the unfinished ones walk on
     in gathered chunks, round by round, and under ``vmap`` the rays of all batch elements are
     walked together (``custom_vmap``), so the cost follows where the rays actually hit rather
-    than ``max_range``.
+    than ``max_range_m``.
 
     Args:
       hfield: terrain; heights outside the representable range are clipped like MuJoCo does.
       origins: (N, 3) ray origins in world [m].
       directions: (N, 3) ray directions in world (any non-zero length; normalized here).
-      max_range: static Python float > 0 [m]; hits farther than this are reported as misses.
+      max_range_m: static Python float > 0 [m]; hits farther than this are reported as misses.
 
     Returns:
       (N,) distance [m] along the normalized direction to the first hit, or ``MISS`` (-1.0)
-      for a miss, a hit beyond ``max_range`` or a zero direction.
+      for a miss, a hit beyond ``max_range_m`` or a zero direction.
     """
-    return _cast(hfield, origins, directions, max_range, False)[0]
+    return _cast(hfield, origins, directions, max_range_m, False)[0]
 
 
 def ray_heightfield_normal(
-    hfield: Heightfield, origins, directions, max_range: float
+    hfield: Heightfield, origins, directions, max_range_m: float
 ) -> tuple[jax.Array, jax.Array]:
     """Like :func:`ray_heightfield`, also returning the unit surface normal at the hit.
 
@@ -461,4 +461,4 @@ def ray_heightfield_normal(
       distance: (N,) [m] or ``MISS`` (-1.0).
       normal: (N, 3) unit world normal at the hit; zeros for a miss.
     """
-    return _cast(hfield, origins, directions, max_range, True)
+    return _cast(hfield, origins, directions, max_range_m, True)

@@ -10,9 +10,8 @@ import jax.numpy as jp
 import numpy as np
 from flax import struct
 
-from foottof import constants
+from foottof import config_check, constants
 from foottof.limits import TILT_LIMIT_DEG  # |extra tilt| about each site axis
-from foottof.limits import TOF_MAX_RATE_HZ as MAX_RATE_HZ  # VL53L5CX rates
 from foottof.sensors.raycast import ray_heightfield_normal
 from foottof.terrain.heightfield import Heightfield
 
@@ -79,21 +78,16 @@ class ToFSpec:
         )
 
     def __post_init__(self):
-        if self.grid not in MAX_RATE_HZ:
-            raise ValueError(
-                f"grid (resolution) must be one of {sorted(MAX_RATE_HZ)}, got {self.grid!r}"
-            )
-        if not 0.0 < self.rate_hz <= MAX_RATE_HZ[self.grid]:
-            raise ValueError(
-                f"rate_hz={self.rate_hz!r} out of range (0, {MAX_RATE_HZ[self.grid]}] for "
-                f"{self.grid}x{self.grid} zones"
-            )
-        if not 0.0 < self.fov_deg < 180.0:
-            raise ValueError(f"fov_deg must be in (0, 180), got {self.fov_deg!r}")
-        if not self.max_range_m > 0.0:
-            raise ValueError(f"max_range_m must be > 0, got {self.max_range_m!r}")
-        if not 0.0 < self.resolution_m <= self.max_range_m:
-            raise ValueError(f"resolution_m must be in (0, max_range_m], got {self.resolution_m!r}")
+        config_check.check_fields(  # the sensor.* rules, defined once (foottof.config_check)
+            "sensor",
+            {
+                "grid": self.grid,
+                "fov_deg": self.fov_deg,
+                "max_range_m": self.max_range_m,
+                "resolution_m": self.resolution_m,
+                "rate_hz": self.rate_hz,
+            },
+        )
         if self.num_sensors < 1:
             raise ValueError(f"num_sensors must be >= 1, got {self.num_sensors!r}")
         if np.shape(self.tilt_deg) != (self.num_sensors, 2):

@@ -1,0 +1,77 @@
+"""Renamed public names, defined once (imports no JAX), and the migrations that keep what older
+code wrote readable: saved run configs (config.json), metrics.csv columns, evaluation result
+rows and per-episode documents, checkpoints (their env metrics), and command-line overrides.
+
+Speeds were suffixed ``_ms`` (metres per second), which reads as milliseconds; they are ``_mps``
+now (CHANGELOG.md, 2026-12-02, third round).
+"""
+
+from __future__ import annotations
+
+# Config fields: old dotted path -> new dotted path.
+CONFIG_FIELDS = {
+    "env.randomization.push_vel_ms": "env.randomization.push_vel_mps",
+    "reward.guidance_max_speed_ms": "reward.guidance_max_speed_mps",
+    "reward.stall_speed_ms": "reward.stall_speed_mps",
+}
+# Env metrics (state.metrics keys, metrics.csv columns, TensorBoard tags): old -> new.
+METRICS = {
+    "episode/speed_ms": "episode/speed_mps",
+    "task/speed_ms": "task/speed_mps",
+}
+# Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
+RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}
+
+
+def migrate_config_dict(saved: dict) -> dict:
+    """A saved run config (the nested dict of config.json) with renamed fields moved to their
+    new names (a copy; a field present under both names keeps the new one)."""
+    out = _copy(saved)
+    for old, new in CONFIG_FIELDS.items():
+        *old_path, old_leaf = old.split(".")
+        *new_path, new_leaf = new.split(".")
+        parent = _walk(out, old_path)
+        if parent is None or old_leaf not in parent:
+            continue
+        value = parent.pop(old_leaf)
+        target = _walk(out, new_path)
+        if target is not None:
+            target.setdefault(new_leaf, value)
+    return out
+
+
+def migrate_columns(fields: list[str]) -> list[str]:
+    """metrics.csv header with renamed metric columns under their new names (order kept)."""
+    return [METRICS.get(f, f) for f in fields]
+
+
+def migrate_row(row: dict) -> dict:
+    """A result row or per-episode cell with renamed keys under their new names (order kept)."""
+    return {RESULT_KEYS.get(k, k): v for k, v in row.items()}
+
+
+def old_override(argv: list[str]) -> str | None:
+    """An error line for the first ``--config.<old name>`` override in argv (None: none): the
+    config is locked, so ml_collections would only say the field does not exist."""
+    for arg in argv:
+        if not arg.startswith("--config."):
+            continue
+        name = arg[len("--config.") :].split("=", 1)[0]
+        if name in CONFIG_FIELDS:
+            return (
+                f"error: --config.{name} was renamed to --config.{CONFIG_FIELDS[name]} "
+                f"(speeds are suffixed _mps, metres per second; CHANGELOG.md)"
+            )
+    return None
+
+
+def _copy(d):
+    return {k: _copy(v) for k, v in d.items()} if isinstance(d, dict) else d
+
+
+def _walk(d: dict, path: list[str]) -> dict | None:
+    for k in path:
+        d = d.get(k) if isinstance(d, dict) else None
+        if not isinstance(d, dict):
+            return None
+    return d

@@ -1,0 +1,98 @@
+"""Renamed names (foottof.renames): what older code wrote stays readable, old flags say the new name."""
+
+import csv
+import json
+from pathlib import Path
+
+import pytest
+from helpers import REPO, run_cli
+
+from configs import load_config
+from foottof import renames
+from foottof.eval import paired
+from foottof.lab import curves
+from foottof.ppo import runner
+
+SHIPPED_RUN_CONFIG = Path(REPO) / "policies" / "stage1" / "config.json"
+
+
+def _leaf(d: dict, dotted: str):
+    for k in dotted.split("."):
+        d = d[k]
+    return d
+
+
+def test_every_renamed_field_exists_under_its_new_name_only():
+    cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py")).to_dict()
+    for old, new in renames.CONFIG_FIELDS.items():
+        _leaf(cfg, new)
+        with pytest.raises(KeyError):
+            _leaf(cfg, old)
+        assert old.endswith("_ms") and new == old[:-3] + "_mps"
+
+
+def test_shipped_run_config_migrates_to_the_current_field_names():
+    """policies/stage1's config.json was written with the old names: after the migration its
+    fields are the current config's (same names; values as saved)."""
+    saved = json.loads(SHIPPED_RUN_CONFIG.read_text())
+    for old in renames.CONFIG_FIELDS:
+        _leaf(saved, old)  # the shipped file predates the rename
+    migrated = renames.migrate_config_dict(saved)
+    for old, new in renames.CONFIG_FIELDS.items():
+        assert _leaf(migrated, new) == _leaf(saved, old)
+        with pytest.raises(KeyError):
+            _leaf(migrated, old)
+    current = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py")).to_dict()
+    for section in ("env", "reward"):
+        assert _keys(migrated[section]) == _keys(current[section])
+    assert _leaf(saved, "reward.stall_speed_ms") == 0.1  # the migration copied, not moved
+    assert renames.migrate_config_dict({"reward": {}}) == {"reward": {}}
+
+
+def _keys(d, prefix=""):
+    out = set()
+    for k, v in d.items():
+        out |= _keys(v, f"{prefix}{k}.") if isinstance(v, dict) else {prefix + k}
+    return out
+
+
+def test_old_metric_columns_are_read_and_rewritten_under_new_names(tmp_path):
+    """A metrics.csv of an older run: the curves read 'task/speed_ms' as 'task/speed_mps', and a
+    resume (trim_metrics) renames the column so the new rows continue it."""
+    path = tmp_path / "metrics.csv"
+    with path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["iteration", "time/iteration_s", "task/speed_ms", "episode/speed_ms"])
+        w.writerows([[1, 2.0, 0.5, 0.6], [2, 2.0, 0.7, 0.8], [3, 2.0, 0.9, 1.0]])
+    cols = curves.read_metrics(str(path))
+    assert list(cols["task/speed_mps"]) == [0.5, 0.7, 0.9]
+    assert "task/speed_ms" not in cols
+    runner.trim_metrics(str(tmp_path), 2)
+    rows = list(csv.DictReader(path.open()))
+    assert [r["task/speed_mps"] for r in rows] == ["0.5", "0.7"]
+    assert [r["episode/speed_mps"] for r in rows] == ["0.6", "0.8"]
+    assert "task/speed_ms" not in rows[0]
+
+
+def test_shipped_episode_documents_of_schema_1_pair(tmp_path):
+    """Per-episode documents written before the rename (schema 1, 'mean_speed_ms') load."""
+    files = sorted((Path(REPO) / "results").glob("*/episodes_*.json"))
+    old = [p for p in files if json.loads(p.read_text())["schema_version"] == 1]
+    assert old, "expected committed episodes files written with schema 1"
+    doc = paired.load_episodes(str(old[0]))
+    assert all("mean_speed_mps" in c and "mean_speed_ms" not in c for c in doc["cells"])
+    bad = tmp_path / "episodes_x.json"
+    bad.write_text(json.dumps({"schema_version": 9, "cells": []}))
+    with pytest.raises(ValueError, match="schema version 9"):
+        paired.load_episodes(str(bad))
+
+
+@pytest.mark.parametrize("script", ["train.py", "evaluate.py"])
+def test_old_override_names_the_new_field(script):
+    r = run_cli(script, "--config.reward.stall_speed_ms=0.2")
+    assert r.returncode != 0
+    assert "--config.reward.stall_speed_ms was renamed to --config.reward.stall_speed_mps" in (
+        r.stderr
+    )
+    assert "Traceback" not in r.stderr
+    assert renames.old_override(["--config.reward.stall_speed_mps=0.2", "--resume"]) is None

@@ -15,10 +15,10 @@ from foottof.limits import (  # the one home of allowed values (imports no JAX)
     MAX_TIMESTEP_S,
     PHYSICS_BACKENDS,
     POLICIES,
+    SOURCES,
     TILT_LIMIT_DEG,
     TOF_MAX_RATE_HZ,
 )
-from foottof.perception import SOURCES  # imports no JAX
 
 SECTIONS = ("terrain", "sensor", "noise", "env", "reward", "ppo", "network", "train", "eval")
 

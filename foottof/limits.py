@@ -21,3 +21,9 @@ LEVEL_RANGES = {
     "shank_length": (0.8, 1.2),
     "odometry": (0.0, 10.0),
 }
+# Perception (foottof.perception): the foot-reading sources.
+# tof: rays cast from the simulated foot sensor sites on the terrain (foottof.sensors.tof.sense).
+# mock_ideal: the same rays cast on the ideal 5 m x 5 m, 5 cm height scan around the base, from
+#   sensor poses computed from the measured joints through the nominal kinematics.
+# mock_aggre: as mock_ideal, on the camera-aggregated elevation map (elevation_map.aggre_*).
+SOURCES = ("tof", "mock_ideal", "mock_aggre")

@@ -101,7 +101,7 @@ def test_allowed_values_live_once():
     from foottof.ppo import networks, train
     from foottof.sensors import tof
 
-    assert cc.SOURCES is perception.SOURCES
+    assert cc.SOURCES is perception.SOURCES is limits.SOURCES
     assert physics.BACKENDS is limits.PHYSICS_BACKENDS is cc.PHYSICS_BACKENDS
     assert train.LR_SCHEDULES is limits.LR_SCHEDULES is cc.LR_SCHEDULES
     assert networks.POLICIES is limits.POLICIES is cc.POLICIES

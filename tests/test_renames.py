@@ -96,3 +96,31 @@ def test_old_override_names_the_new_field(script):
     )
     assert "Traceback" not in r.stderr
     assert renames.old_override(["--config.reward.stall_speed_mps=0.2", "--resume"]) is None
+
+
+@pytest.mark.parametrize(
+    "policy, config", [("stage1", "stage1_cpu.py"), ("flat", "flat.py")], ids=["stage1", "flat"]
+)
+def test_shipped_policies_fit_this_code_for_resume(policy, config):
+    """Every leaf of the shipped checkpoint fits the TrainState this code builds from the run's
+    config (names and shapes, as Checkpointer.restore checks them before reading; env metrics
+    saved under old names are allowed). Shapes only: the TrainState is traced with
+    jax.eval_shape, nothing is compiled or run."""
+    import jax
+
+    from foottof.envs import make_training_env
+    from foottof.ppo import checkpoint as ckpt
+    from foottof.ppo import train as train_lib
+
+    run = Path(REPO) / "policies" / policy
+    cfg = load_config(str(Path(REPO) / "configs" / config))
+    checkpointer = ckpt.Checkpointer(str(run))
+    step = checkpointer.latest_step()
+    manifest = checkpointer.manifest(step)
+    checkpointer.close()
+    trainer = train_lib.make_train(make_training_env(cfg), cfg)
+    target = jax.eval_shape(trainer.init, jax.random.PRNGKey(0))
+    for item in ckpt.ITEMS:
+        if item in manifest:
+            ckpt.check_compatible(item, manifest[item], ckpt._sub(target, item), policy)
+    assert "rollout" in manifest  # the env state too: a resume continues the same episodes

@@ -73,3 +73,12 @@ def test_failure_causes_from_step_records():
     # env 3: another fall; env 4: done without success or failure (timeout); env 5: never ended
     got = [CAUSES[i] for i in classify(done, success, failed, stuck, base_z)]
     assert got == ["success", "foot_stuck", "fell_base_low", "other_fall", "timeout", "timeout"]
+
+
+def test_failure_feet_line_counts_each_foot():
+    import numpy as np
+
+    from foottof.eval.failures import format_feet
+
+    line = format_feet(np.array([-1, 0, 2, 2, 3, -1, 2]))  # -1: not a foot_stuck episode
+    assert line.endswith("LF 1, RF 0, LH 3, RH 1")

@@ -12,7 +12,7 @@ from helpers import hfield_mj_model
 from scipy import ndimage
 
 from configs import _eval, _terrain
-from foottof.envs.anymal_tof import foot_stuck
+from foottof.envs.anymal_tof import foot_gap_depth, foot_stuck
 from foottof.terrain import (
     SPAWN_X,
     SPAWN_Y,
@@ -484,6 +484,10 @@ def test_foot_in_a_gap_wider_than_the_foot_ends_the_episode_mujoco_c(name):
     stuck = np.asarray(foot_stuck(jp.asarray(world), hf.height_at, STUCK_DEPTH_M))
     ended = stuck | (pos[:, 2] < -0.45)
     assert ended.all(), (name, pos, stuck)
+    # foot_gap_depth (which foot went in, for the failure analysis) agrees with the predicate.
+    depth = np.asarray(foot_gap_depth(jp.asarray(world), hf.height_at))
+    np.testing.assert_array_equal(depth > STUCK_DEPTH_M, stuck)
+    assert np.all(depth[stuck] > STUCK_DEPTH_M)
 
 
 @pytest.mark.parametrize("name", ("rough_boxes", "stairs", "pyramid_up", "pyramid_down"))
@@ -504,6 +508,7 @@ def test_no_stuck_foot_on_gap_free_terrain(tiles, name):
     for lift in (FOOT_R, FOOT_R + 0.1):
         feet = jp.asarray(np.concatenate([xy, (ground + lift)[:, None]], axis=-1))
         assert not np.asarray(foot_stuck(feet, hf.height_at, STUCK_DEPTH_M)).any()
+        assert np.all(np.asarray(foot_gap_depth(feet, hf.height_at)) == -np.inf)  # no gap around
 
 
 def test_stone_schedules_keep_the_evaluation_ensemble():

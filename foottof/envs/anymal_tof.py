@@ -151,14 +151,27 @@ _STUCK_PROBE = tuple(
 ) + ((0.0, 0.0),)
 
 
+def _probe_top_bottom(foot_pos: jax.Array, height_at) -> tuple[jax.Array, jax.Array]:
+    """(F,) highest and lowest terrain within STUCK_PROBE_RADIUS_M of each foot centre [m]."""
+    offs = jp.asarray(_STUCK_PROBE, jp.float32)
+    around = height_at(foot_pos[:, None, :2] + offs[None])  # (F, 9)
+    return jp.max(around, axis=-1), jp.min(around, axis=-1)
+
+
 def foot_stuck(foot_pos: jax.Array, height_at, depth_m: float) -> jax.Array:
     """(F,) bool: a foot went into a gap (wedged in a drawn notch, or falling through): its centre
     lies more than ``depth_m`` below the highest terrain within STUCK_PROBE_RADIUS_M, and that
     terrain spans a gap (more than STUCK_GAP_SPAN_M from its lowest to its highest point)."""
-    offs = jp.asarray(_STUCK_PROBE, jp.float32)
-    around = height_at(foot_pos[:, None, :2] + offs[None])  # (F, 9)
-    top, bottom = jp.max(around, axis=-1), jp.min(around, axis=-1)
+    top, bottom = _probe_top_bottom(foot_pos, height_at)
     return (foot_pos[:, 2] < top - depth_m) & (top - bottom > STUCK_GAP_SPAN_M)
+
+
+def foot_gap_depth(foot_pos: jax.Array, height_at) -> jax.Array:
+    """(F,) how far each foot centre lies below the highest terrain around it [m] where that
+    terrain spans a gap, as foot_stuck measures it (-inf for a foot with no gap around it): which
+    foot went in, for the failure analysis (foottof.eval.failures)."""
+    top, bottom = _probe_top_bottom(foot_pos, height_at)
+    return jp.where(top - bottom > STUCK_GAP_SPAN_M, top - foot_pos[:, 2], -jp.inf)
 
 
 def actor_obs_layout(num_sensors: int, num_zones: int) -> list[tuple[str, int, int, str]]:

@@ -3,7 +3,8 @@
 ``python -m foottof.eval.failures RUN_DIR [--config configs/stage1_cpu.py] [--difficulty_fraction
 0.111] [--episodes 100] [--seed 5]`` runs the run's policy (mean actions) for one episode per env
 on the evaluation map at ``eval.difficulty_fraction`` of the stage-1 range and prints, per terrain
-type, how many episodes ended in each cause with the mean step and progress at the end:
+type, how many episodes ended in each cause with the mean step and progress at the end, and
+which feet went into the gaps:
 
 - ``success``: ended at the deadline within the success radius;
 - ``foot_stuck``: a foot went into a gap (``env.foot_stuck_depth_m``);
@@ -41,11 +42,14 @@ def classify(done, success, failed, stuck, base_z) -> np.ndarray:
 
 
 def run(cfg, checkpoint: str, episodes: int, seed: int):
-    """(cause per env, terrain type name per env, end step, progress at the end)."""
+    """(cause per env, terrain type name per env, end step, progress at the end, the foot that
+    went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck)."""
     import jax
     import jax.numpy as jp
 
+    from foottof.envs.anymal_tof import foot_gap_depth
     from foottof.eval.harness import make_eval_env_and_policy
+    from foottof.robot.kinematics import world_foot_kinematics
     from foottof.terrain import TERRAIN_TYPES
 
     key = jax.random.PRNGKey(seed)
@@ -53,6 +57,10 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
     state = jax.jit(jax.vmap(env.reset))(jax.random.split(key, episodes))
     act = nets.policy_fn(params, norm, deterministic=True)
     step = jax.vmap(env.step)
+
+    def gap_depth(qpos):  # (4,) depth of each foot below the terrain around it, beside a gap
+        foot_pos = world_foot_kinematics(qpos[:19], env.shank_scale).foot_pos
+        return foot_gap_depth(foot_pos, env.hfield.height_at)
 
     @jax.jit
     def rollout(state):
@@ -63,12 +71,13 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
             m = s2.metrics
             rec = (s2.done, m["episode/success"], m["episode/failed"], m["episode/foot_stuck"])
             rec += (s.pipeline_state.qpos[:, 2], m["episode/progress"], s.info["task"].col)
+            rec += (jax.vmap(gap_depth)(s.pipeline_state.qpos),)  # before the step that ends it
             return (s2, lstm, s2.done > 0.5), rec
 
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
         return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
 
-    done, succ, fail, stuck, base_z, prog, col = (
+    done, succ, fail, stuck, base_z, prog, col, depth = (
         np.asarray(x) for x in jax.device_get(rollout(state))
     )
     cause = classify(done, succ, fail, stuck, base_z)
@@ -76,7 +85,16 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
     t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), done.shape[0] - 1)
     e = np.arange(episodes)
     types = np.asarray(env.tmap.col_type)[col[0]]
-    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e]
+    foot = np.where(cause == CAUSES.index("foot_stuck"), np.argmax(depth[t, e], axis=-1), -1)
+    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot
+
+
+def format_feet(foot: np.ndarray) -> str:
+    """One line: how many foot_stuck episodes each foot ended (constants.FEET order)."""
+    from foottof.constants import FEET
+
+    counts = ", ".join(f"{name} {int(np.sum(foot == i))}" for i, name in enumerate(FEET))
+    return f"foot_stuck by foot (the deepest foot before the last step): {counts}"
 
 
 def format_table(cause, types, end_step, progress) -> str:
@@ -118,7 +136,9 @@ def main(argv=None) -> None:
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     try:
-        print(format_table(*run(cfg, args.run_dir, args.episodes, args.seed)))
+        *outcomes, foot = run(cfg, args.run_dir, args.episodes, args.seed)
+        print(format_table(*outcomes))
+        print(format_feet(foot))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:
         raise SystemExit(f"error: {e}") from None
 

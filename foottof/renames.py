@@ -40,6 +40,24 @@ def migrate_config_dict(saved: dict) -> dict:
     return out
 
 
+def legacy_config_dict(current: dict) -> dict:
+    """A config dict with renamed fields under their old names (a copy): what draw fingerprints
+    hash (foottof.eval.results.draws_fingerprint), so evaluations made before and after a rename
+    still pair episode by episode."""
+    out = _copy(current)
+    for old, new in CONFIG_FIELDS.items():
+        *new_path, new_leaf = new.split(".")
+        *old_path, old_leaf = old.split(".")
+        parent = _walk(out, new_path)
+        if parent is None or new_leaf not in parent:
+            continue
+        value = parent.pop(new_leaf)
+        target = _walk(out, old_path)
+        if target is not None:
+            target[old_leaf] = value
+    return out
+
+
 def migrate_columns(fields: list[str]) -> list[str]:
     """metrics.csv header with renamed metric columns under their new names (order kept)."""
     return [METRICS.get(f, f) for f in fields]

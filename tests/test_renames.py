@@ -124,3 +124,24 @@ def test_shipped_policies_fit_this_code_for_resume(policy, config):
         if item in manifest:
             ckpt.check_compatible(item, manifest[item], ckpt._sub(target, item), policy)
     assert "rollout" in manifest  # the env state too: a resume continues the same episodes
+
+
+def test_draw_fingerprint_is_kept_across_the_rename():
+    """An evaluation written before the rename (results/stage1_trapfree_d01, by the code of
+    2026-12-02's second round) pairs with one made now with the same config: the fingerprint this
+    code computes equals the one in the committed file."""
+    from foottof.eval import results
+
+    doc = json.loads(
+        (Path(REPO) / "results" / "stage1_trapfree_d01" / "episodes_tof_none.json").read_text()
+    )
+    cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
+    cfg.eval.num_envs, cfg.eval.seed, cfg.eval.episodes = 200, 4242, 200
+    cfg.eval.difficulty_fraction = 0.125
+    assert results.episode_draws(cfg) == doc["draws"]
+    cfg.reward.stall_speed_mps = 0.2  # a renamed field still counts
+    assert results.draws_fingerprint(cfg) != doc["draws"]["fingerprint"]
+    back = renames.legacy_config_dict(
+        renames.migrate_config_dict({"reward": {"stall_speed_ms": 1}})
+    )
+    assert back == {"reward": {"stall_speed_ms": 1}}

@@ -148,8 +148,10 @@ def ensemble_caption(ensemble: dict, rows: list[dict], checkpoints: list[str] = 
 def draws_fingerprint(cfg) -> str:
     """sha256 (16 hex digits) of the config leaves that decide an evaluation's episode draws
     and outcomes (DRAW_SECTIONS): two evaluations with equal fingerprints, seeds, batch sizes and
-    episode counts ran the same episodes, so their outcomes pair episode by episode."""
+    episode counts ran the same episodes, so their outcomes pair episode by episode. Renamed
+    fields are hashed under their old names (foottof.renames): a rename keeps the fingerprint."""
     d = {k: cfg[k].to_dict() if hasattr(cfg[k], "to_dict") else cfg[k] for k in DRAW_SECTIONS}
+    d = renames.legacy_config_dict(d)  # renamed fields hash under their first names
     d["eval"] = dict(d["eval"])
     for k in _NOT_DRAW_EVAL_KEYS:
         d["eval"].pop(k, None)

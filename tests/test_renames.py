@@ -127,13 +127,15 @@ def test_shipped_policies_fit_this_code_for_resume(policy, config):
 
 
 def test_draw_fingerprint_is_kept_across_the_rename():
-    """An evaluation written before the rename (results/stage1_trapfree_d01, by the code of
+    """An evaluation written before the rename (results/stage1_trapfree_it1110_d01, by the code of
     2026-12-02's second round) pairs with one made now with the same config: the fingerprint this
     code computes equals the one in the committed file."""
     from foottof.eval import results
 
     doc = json.loads(
-        (Path(REPO) / "results" / "stage1_trapfree_d01" / "episodes_tof_none.json").read_text()
+        (
+            Path(REPO) / "results" / "stage1_trapfree_it1110_d01" / "episodes_tof_none.json"
+        ).read_text()
     )
     cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
     cfg.eval.num_envs, cfg.eval.seed, cfg.eval.episodes = 200, 4242, 200

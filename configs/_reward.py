@@ -7,6 +7,7 @@ def get_section() -> ml_collections.ConfigDict:
     r = ml_collections.ConfigDict()
     r.success_radius_m = 0.5  # ending within this distance of the goal is a success [m]
     r.guidance_max_speed_mps = 1.0  # dense guidance saturates at this speed toward the goal [m/s]
+    r.guidance_peaked = False  # True: above guidance_max_speed_mps the guidance falls (2 vmax - v)
     r.stall_speed_mps = 0.1  # below this speed while far from the goal counts as stalling [m/s]
     r.stall_grace_s = 2.0  # no stall penalty during the first seconds of an episode [s]
     r.jump_grace_s = 0.2  # no jump penalty while the spawn drop lands [s]

@@ -248,6 +248,7 @@ RULES = {
     # reward
     "reward.success_radius_m": _pos,
     "reward.guidance_max_speed_mps": _pos,
+    "reward.guidance_peaked": _bool,
     "reward.stall_speed_mps": _nonneg,
     "reward.stall_grace_s": _nonneg,
     "reward.jump_grace_s": _nonneg,

@@ -19,6 +19,10 @@ METRICS = {
     "episode/speed_ms": "episode/speed_mps",
     "task/speed_ms": "task/speed_mps",
 }
+# Config fields added after evaluations were made, with the default that reproduces the older
+# behaviour: draw fingerprints leave them out at that default (legacy_config_dict), so evaluations
+# from before the field existed still pair with ones made after.
+ADDED_FIELDS = {"reward.guidance_peaked": False}
 # Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
 RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}
 
@@ -41,10 +45,16 @@ def migrate_config_dict(saved: dict) -> dict:
 
 
 def legacy_config_dict(current: dict) -> dict:
-    """A config dict with renamed fields under their old names (a copy): what draw fingerprints
-    hash (foottof.eval.results.draws_fingerprint), so evaluations made before and after a rename
-    still pair episode by episode."""
+    """A config dict with renamed fields under their old names and added fields at their old-
+    behaviour default left out (a copy): what draw fingerprints hash
+    (foottof.eval.results.draws_fingerprint), so evaluations made before and after a rename or
+    an addition still pair episode by episode."""
     out = _copy(current)
+    for added, default in ADDED_FIELDS.items():
+        *path, leaf = added.split(".")
+        parent = _walk(out, path)
+        if parent is not None and leaf in parent and parent[leaf] == default:
+            del parent[leaf]
     for old, new in CONFIG_FIELDS.items():
         *new_path, new_leaf = new.split(".")
         *old_path, old_leaf = old.split(".")

@@ -245,6 +245,14 @@ def test_reward_terms_hand_checked():
     assert _terms(base_lin_vel=jp.array([1.0, 0.0, 0.0]))["guidance"] == pytest.approx(0.6)
     # ... clipped at guidance_max_speed_mps (1.0): v = (3, 4) -> 5 m/s toward -> 1.0
     assert _terms(base_lin_vel=jp.array([3.0, 4.0, 0.0]))["guidance"] == pytest.approx(1.0)
+    # ... or, with guidance_peaked, falling above it: 2 * 1.0 - v, not below -1.0.
+    peaked = _cfg().reward
+    peaked.guidance_peaked = True
+    for v, want in ((0.5, 0.5), (1.0, 1.0), (1.5, 0.5), (2.5, -0.5), (5.0, -1.0), (-2.0, -1.0)):
+        x = _inputs(base_lin_vel=jp.array([0.6 * v, 0.8 * v, 0.0]))
+        assert float(rw.compute_terms(x, peaked, 0.02)["guidance"]) == pytest.approx(want)
+    x = _inputs(base_lin_vel=jp.array([3.0, 4.0, 0.0]), goal_xy=jp.array([0.3, 0.0]))
+    assert float(rw.compute_terms(x, peaked, 0.02)["guidance"]) == 1.0  # at the goal: full credit
     # Torques: 12 joints at 2 N m -> 12 * 4 = 48.
     assert _terms(torques=jp.full(12, 2.0))["torques"] == pytest.approx(48.0)
     # Joint acc: one joint 0.1 rad/s faster over 0.02 s -> (5 rad/s^2)^2 = 25.

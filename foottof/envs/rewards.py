@@ -117,7 +117,10 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
     v_toward = jp.dot(x.base_lin_vel[:2], to_goal)
     vmax = rcfg.guidance_max_speed_mps
     # Dense guidance: speed toward the goal (clipped); full credit once within the success radius.
-    guidance = jp.where(at_goal > 0, vmax, jp.clip(v_toward, -vmax, vmax))
+    paid = jp.clip(v_toward, -vmax, vmax)
+    if rcfg.get("guidance_peaked", False):  # static: above vmax the pay falls as it rose
+        paid = jp.where(v_toward > vmax, jp.maximum(2.0 * vmax - v_toward, -vmax), paid)
+    guidance = jp.where(at_goal > 0, vmax, paid)
     speed = jp.linalg.norm(x.base_lin_vel[:2])
     stalling = (speed < rcfg.stall_speed_mps) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)

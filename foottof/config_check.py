@@ -366,20 +366,18 @@ def _check_ppo_cross(p) -> None:
         )
 
 
-def _check_sensor_cross(s, prefix: str = "sensor") -> None:
+def _check_sensor_cross(s) -> None:
     """Checks between fields of c.sensor (rate per grid, resolution within the range)."""
     max_hz = TOF_MAX_RATE_HZ[s.grid]
     if s.rate_hz > max_hz:
         _fail(
-            f"{prefix}.rate_hz",
-            s.rate_hz,
-            f"must be in (0, {max_hz:g}] for a {s.grid}x{s.grid} grid",
+            "sensor.rate_hz", s.rate_hz, f"must be in (0, {max_hz:g}] for a {s.grid}x{s.grid} grid"
         )
     if s.resolution_m > s.max_range_m:
         _fail(
-            f"{prefix}.resolution_m",
+            "sensor.resolution_m",
             s.resolution_m,
-            f"must be <= {prefix}.max_range_m={s.max_range_m:g}",
+            f"must be <= sensor.max_range_m={s.max_range_m:g}",
         )
 
 

@@ -32,15 +32,7 @@ def migrate_config_dict(saved: dict) -> dict:
     new names (a copy; a field present under both names keeps the new one)."""
     out = _copy(saved)
     for old, new in CONFIG_FIELDS.items():
-        *old_path, old_leaf = old.split(".")
-        *new_path, new_leaf = new.split(".")
-        parent = _walk(out, old_path)
-        if parent is None or old_leaf not in parent:
-            continue
-        value = parent.pop(old_leaf)
-        target = _walk(out, new_path)
-        if target is not None:
-            target.setdefault(new_leaf, value)
+        _move(out, old, new)
     return out
 
 
@@ -56,15 +48,7 @@ def legacy_config_dict(current: dict) -> dict:
         if parent is not None and leaf in parent and parent[leaf] == default:
             del parent[leaf]
     for old, new in CONFIG_FIELDS.items():
-        *new_path, new_leaf = new.split(".")
-        *old_path, old_leaf = old.split(".")
-        parent = _walk(out, new_path)
-        if parent is None or new_leaf not in parent:
-            continue
-        value = parent.pop(new_leaf)
-        target = _walk(out, old_path)
-        if target is not None:
-            target[old_leaf] = value
+        _move(out, new, old)
     return out
 
 
@@ -91,6 +75,20 @@ def old_override(argv: list[str]) -> str | None:
                 f"(speeds are suffixed _mps, metres per second; CHANGELOG.md)"
             )
     return None
+
+
+def _move(d: dict, src: str, dst: str) -> None:
+    """Moves the leaf at dotted path ``src`` of the nested dict ``d`` to ``dst`` (in place; a leaf
+    already at ``dst`` is kept; nothing happens where ``src`` or the parent of ``dst`` is absent)."""
+    *src_path, src_leaf = src.split(".")
+    *dst_path, dst_leaf = dst.split(".")
+    parent = _walk(d, src_path)
+    if parent is None or src_leaf not in parent:
+        return
+    value = parent.pop(src_leaf)
+    target = _walk(d, dst_path)
+    if target is not None:
+        target.setdefault(dst_leaf, value)
 
 
 def _copy(d):

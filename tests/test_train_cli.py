@@ -174,3 +174,27 @@ def test_same_seed_gives_the_same_curve(tmp_path):
     assert len(curves[0]) == 3
     assert curves[0] == curves[1]
     assert curves[0] != curves[2]
+
+
+@pytest.mark.parametrize(
+    "name, warns",
+    [
+        ("cpu", False),
+        ("flat", False),
+        ("stage1_cpu", False),
+        ("stage2_cpu", False),
+        ("stage1", True),
+        ("stage2", True),
+    ],
+)
+def test_gpu_sized_warning_only_for_the_gpu_configs(name, warns):
+    import importlib
+
+    from foottof.ppo import runner
+
+    cfg = importlib.import_module(f"configs.{name}").get_config()
+    line = runner.gpu_sized_warning(cfg, "cpu")
+    assert (line is not None) == warns, (name, line)
+    assert runner.gpu_sized_warning(cfg, "gpu") is None
+    if warns:
+        assert f"ppo.num_envs={cfg.ppo.num_envs}" in line

@@ -16,7 +16,10 @@ from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import run_dir as run_dirs
 from foottof.ppo import train as train_lib
 
-CPU_MAX_NUM_ENVS = 256  # above this many envs on a CPU backend the run is GPU-sized: warn
+# Above these sizes on a CPU backend a run is GPU-sized: warn. bench/: 1024 envs run at the same
+# env-steps/s as 256 on 2 cores (configs/stage1_cpu.py uses 512); LSTM 256 is stage1.py's GPU net.
+CPU_MAX_NUM_ENVS = 1024
+CPU_MAX_LSTM = 128
 _WATCHED = ("loss/policy", "loss/value", "loss/entropy", "ppo/kl")  # NaN guard (plus params)
 
 
@@ -281,18 +284,27 @@ def run(
             run_dirs.forget_run(latest_link, previous, run_dir if created else None)
 
 
+def gpu_sized_warning(cfg, backend: str) -> str | None:
+    """A warning line when a GPU-sized config (envs or LSTM above the CPU sizes) runs on a CPU."""
+    envs, lstm = int(cfg.ppo.num_envs), int(cfg.network.lstm_hidden_size)
+    if backend != "cpu" or (envs <= CPU_MAX_NUM_ENVS and lstm <= CPU_MAX_LSTM):
+        return None
+    return (
+        f"[runner] WARNING: ppo.num_envs={envs}, network.lstm_hidden_size={lstm} is a GPU-sized "
+        f"config (CPU: <= {CPU_MAX_NUM_ENVS} envs, LSTM <= {CPU_MAX_LSTM}) but JAX runs on CPU; "
+        f"use a CPU config (configs/cpu.py, configs/stage1_cpu.py, configs/stage2_cpu.py)"
+    )
+
+
 def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.TrainState:
     """run() after the run-dir checks; see there."""
     t = cfg.train
     if main:
         _write_config(cfg, run_dir)
 
-    if jax.default_backend() == "cpu" and cfg.ppo.num_envs > CPU_MAX_NUM_ENVS:
-        print(
-            f"[runner] WARNING: ppo.num_envs={cfg.ppo.num_envs} is a GPU-sized config but JAX runs "
-            f"on CPU; override e.g. --config.ppo.num_envs=64 --config.network.lstm_hidden_size=64 "
-            f"(or use the CPU config)"
-        )
+    warning = gpu_sized_warning(cfg, jax.default_backend())
+    if warning:
+        print(warning)
 
     trainer, iteration, cached = _trainer(env, cfg)
     key = jax.random.PRNGKey(int(cfg.get("seed", 0)))

@@ -132,6 +132,16 @@ def _export(cfg, source: str, ckpt, key) -> None:
     print(f"[evaluate] wrote {path}")
 
 
+def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
+    """The finished-cell store of this evaluation (foottof.eval.cells): a rerun of an
+    interrupted command loads the cells it already finished."""
+    from foottof.eval.cells import CellStore, cell_identity
+    from foottof.ppo.checkpoint import policy_digest
+
+    policy = policy_digest(ckpt) if ckpt else "untrained"
+    return CellStore(out, cell_identity(policy, draws, bool(cfg.eval.deterministic)))
+
+
 def main(argv):
     del argv
     logging.set_verbosity(logging.WARNING)
@@ -174,10 +184,13 @@ def main(argv):
         if _ANALYZE.value:
             _analyze(cfg, plan, ckpt, key, out)
             return
+        draws = results.episode_draws(cfg)
+        store = _cell_store(cfg, out, ckpt, draws)
         total = sum(len(levels) for _, _, levels in plan) * int(cfg.eval.episodes)
         with tqdm(total=total, unit="ep", desc="evaluate") as bar:
-            rows, outcomes = rb.run_sweeps(cfg, plan, ckpt, key, bar, return_outcomes=True)
-        draws = results.episode_draws(cfg)
+            rows, outcomes = rb.run_sweeps(cfg, plan, ckpt, key, bar, True, store)
+        if store.loaded:
+            print(f"[evaluate] {len(store.loaded)} cell(s) resumed from {out}/cells")
         paths = results.write_run(
             out,
             _SOURCE.value,
@@ -191,6 +204,7 @@ def main(argv):
         )
     except (ValueError, FileNotFoundError, RuntimeError) as e:
         sys.exit(f"error: {e}")
+    store.clear()  # the results files now hold every cell
     print(results.format_table(rows))
     per_episode = results.episodes_document(list(zip(rows, outcomes, strict=True)), ckpt, draws)
     print(results.format_terrain_breakdown(results.terrain_breakdown(per_episode)))

@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from configs import smoke
-from foottof.eval import harness, paired, plots, results
+from foottof.eval import cells, harness, paired, plots, results
 from foottof.eval import robustness as rb
 from foottof.perception import check_source
 from foottof.ppo import run_dir
@@ -382,15 +382,30 @@ def test_rollout_acts_with_the_mean_or_samples_at_the_capped_std(deterministic):
 
 # ---------------------------------------------------------------------------------------------
 # End to end (one env compile)
+E2E_RUN = {}  # the e2e fixture's cell store and per-episode outcomes
+
+
 @pytest.fixture(scope="module")
 def e2e(tmp_path_factory):
     cfg = tiny_cfg()
     cfg.eval.stone_types = ("mixed_row_stones",)  # 5 columns: 4 mixed-row stones, 1 gap
     cfg.eval.gap_types = ("platform_gap",)
     out = str(tmp_path_factory.mktemp("eval"))
+    store = cells.CellStore(  # each finished cell is also kept (resume: test_cells_resume_...)
+        str(tmp_path_factory.mktemp("cells")),
+        cells.cell_identity("untrained", results.episode_draws(cfg), cfg.eval.deterministic),
+    )
     rows, outcomes = rb.evaluate_sweep(
-        cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0), return_outcomes=True
+        cfg,
+        "mock_ideal",
+        "odometry",
+        (0.0, 2.0),
+        None,
+        jax.random.PRNGKey(0),
+        return_outcomes=True,
+        cells=store,
     )  # one compile for both levels
+    E2E_RUN.update(store=store, outcomes=outcomes)
     written = results.write_run(  # what evaluate.py writes
         out,
         "mock_ideal",
@@ -469,6 +484,115 @@ def test_per_episode_outcomes_match_the_rows_and_pair_with_themselves(e2e, tmp_p
     (other / os.path.basename(paths["episodes"])).write_text(json.dumps(doc))
     with pytest.raises(ValueError, match="seed differs"):
         paired.pair_folders(out, str(other))
+
+
+def test_cells_resume_an_interrupted_sweep_with_the_same_outcomes(e2e, monkeypatch):
+    cfg, _, rows, _ = e2e
+    store, outcomes = E2E_RUN["store"], E2E_RUN["outcomes"]
+    assert sorted(os.path.basename(p) for p in store.written) == [
+        "cell_mock_ideal_odometry_0.0.json",
+        "cell_mock_ideal_odometry_2.0.json",
+    ]
+
+    def must_not_run(*a, **k):
+        raise AssertionError("a stored cell was run again")
+
+    monkeypatch.setattr(rb, "make_eval_env_and_policy", must_not_run)
+    again = cells.CellStore(store.out_dir, store.identity)
+    r2, o2 = rb.evaluate_sweep(
+        cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0), None, True, again
+    )
+    assert r2 == rows and len(again.loaded) == 2 and not again.written
+    for a, b in zip(outcomes, o2, strict=True):
+        assert set(a) == set(b)
+        for k in a:
+            if k == "mean_speed_mps":
+                np.testing.assert_allclose(b[k], a[k], rtol=1e-6)
+            else:
+                np.testing.assert_array_equal(b[k], a[k])
+    other = cells.CellStore(store.out_dir, dict(store.identity, policy="another"))
+    with pytest.raises(AssertionError, match="run again"):  # another policy: the cells rerun
+        rb.evaluate_sweep(
+            cfg, "mock_ideal", "odometry", (0.0, 2.0), None, jax.random.PRNGKey(0), cells=other
+        )
+    again.clear()
+    assert not os.path.exists(os.path.join(store.out_dir, cells.CELLS_SUBDIR))
+
+
+def _cell(level, n=3):
+    row = results.summarize(
+        "tof",
+        "joint_offset",
+        level,
+        {
+            "success": np.array([1, 0, 1][:n], bool),
+            "failed": np.array([0, 1, 0][:n], bool),
+            "mean_speed_mps": np.array([0.5, 0.25, 0.75][:n]),
+        },
+    )
+    outcomes = {
+        "terrain": np.array(["grid_stones", "platform_gap", "grid_stones"][:n]),
+        "success": np.array([1, 0, 1][:n], bool),
+        "failed": np.array([0, 1, 0][:n], bool),
+        "finished": np.ones(n, bool),
+        "length": np.array([50, 20, 50][:n]),
+        "mean_speed_mps": np.array([0.5, 0.25, 0.75][:n]),
+    }
+    return row, outcomes
+
+
+def test_cell_store_reuses_only_an_intact_cell_of_the_same_identity(tmp_path):
+    draws = {"seed": 1, "num_envs": 3, "episodes": 3, "fingerprint": "abc"}
+    store = cells.CellStore(str(tmp_path), cells.cell_identity("p1", draws, True))
+    row, outcomes = _cell(0.1)
+    path = store.save(row, outcomes)
+    assert store.load("tof", "joint_offset", 0.2) is None  # another level
+    assert store.load("mock_ideal", "joint_offset", 0.1) is None  # another source
+    got_row, got = store.load("tof", "joint_offset", 0.1)
+    assert got_row == row
+    for k in results.EPISODE_KEYS:
+        np.testing.assert_array_equal(got[k], outcomes[k])
+    for identity in (
+        cells.cell_identity("p2", draws, True),  # another policy
+        cells.cell_identity("p1", dict(draws, seed=2), True),  # other draws
+        cells.cell_identity("p1", draws, False),  # sampled actions
+    ):
+        assert cells.CellStore(str(tmp_path), identity).load("tof", "joint_offset", 0.1) is None
+    text = open(path).read()
+    for damaged in (
+        text[: len(text) // 2],
+        text.replace('"successes": 2', '"successes": "2"'),
+        text.replace('"length": [50, 20, 50]', '"length": [50, 20]'),
+    ):
+        with open(path, "w") as f:
+            f.write(damaged)
+        assert store.load("tof", "joint_offset", 0.1) is None, damaged[-80:]
+    store.clear()
+    assert os.listdir(tmp_path) == []
+
+
+def test_policy_digest_follows_the_policy_files(tmp_path):
+    from foottof.ppo.checkpoint import policy_digest
+
+    run = tmp_path / "run"
+    for step, value in ((10, b"a"), (20, b"b")):
+        for item in ("params", "normalizer", "opt_state"):
+            d = run / "checkpoints" / str(step) / item
+            d.mkdir(parents=True)
+            (d / "d").write_bytes(value + item.encode())
+    latest = policy_digest(str(run))
+    assert (
+        latest
+        == policy_digest(str(run / "checkpoints"))
+        == policy_digest(str(run / "checkpoints" / "20"))
+    )
+    assert policy_digest(str(run / "checkpoints" / "10")) != latest
+    (run / "checkpoints" / "20" / "opt_state" / "d").write_bytes(b"other")  # not the policy
+    assert policy_digest(str(run)) == latest
+    (run / "checkpoints" / "20" / "params" / "d").write_bytes(b"other")
+    assert policy_digest(str(run)) != latest
+    with pytest.raises(FileNotFoundError):
+        policy_digest(str(tmp_path / "empty"))
 
 
 def _save_checkpoint(run_dir, params, normalizer):

@@ -180,6 +180,7 @@ def evaluate_sweep(
     key: jax.Array,
     progress=None,
     return_outcomes: bool = False,
+    cells=None,
 ):
     """Runs eval.episodes first episodes at every level of one (source, perturbation); rows.
 
@@ -198,6 +199,8 @@ def evaluate_sweep(
         first_episode_outcomes and ``terrain`` (the terrain type name of the episode's tile).
         Episode i is the same draw at every level, and in every evaluation with the same
         results.episode_draws (eval.seed, batch size, eval.episodes, draws_fingerprint).
+      cells: optional foottof.eval.cells.CellStore: a level stored there is loaded instead of
+        run, and each level run is stored as soon as it finishes (an interrupted sweep resumes).
 
     Returns:
       One result row (keys RESULT_KEYS) per level, in the order of ``levels``; with
@@ -213,8 +216,19 @@ def evaluate_sweep(
     traced = perturbation in TRACED_PERTURBATIONS
     groups = [levels] if traced or perturbation == "none" else [(lv,) for lv in levels]
     type_names = np.asarray(TERRAIN_TYPES)
-    rows, outcomes = [], []
+    stored = {
+        lv: (cells.load(source, perturbation, lv) if cells is not None else None) for lv in levels
+    }
+    done = {}  # level -> (row, outcomes)
     for group in groups:
+        todo = [lv for lv in group if stored[lv] is None]
+        for lv in group:
+            if stored[lv] is not None:
+                done[lv] = stored[lv]
+                if progress is not None:
+                    progress.update(episodes)
+        if not todo:
+            continue  # every level of the group is stored: nothing to build or compile
         env, networks, params, normalizer = make_eval_env_and_policy(
             cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
         )
@@ -227,7 +241,7 @@ def evaluate_sweep(
             perturbation,
             deterministic=bool(cfg.eval.deterministic),
         )
-        for level in group:
+        for level in todo:
             parts, collected, k_run = [], 0, key_run
             while collected < episodes:
                 k_run, k = jax.random.split(k_run)
@@ -240,8 +254,11 @@ def evaluate_sweep(
                 if progress is not None:
                     progress.update(take)
             merged = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
-            rows.append(summarize(source, perturbation, level, merged))
-            outcomes.append(merged)
+            done[level] = (summarize(source, perturbation, level, merged), merged)
+            if cells is not None:
+                cells.save(*done[level])
+    rows = [done[lv][0] for lv in levels]
+    outcomes = [done[lv][1] for lv in levels]
     return (rows, outcomes) if return_outcomes else rows
 
 
@@ -281,16 +298,24 @@ def sweep_plan(
 
 
 def run_sweeps(
-    cfg, plan, checkpoint: str | None, key: jax.Array, progress=None, return_outcomes=False
+    cfg,
+    plan,
+    checkpoint: str | None,
+    key: jax.Array,
+    progress=None,
+    return_outcomes=False,
+    cells=None,
 ):
     """Result rows of every sweep of ``plan`` (sweep_plan), all with the same ``key``: every
     cell sees the same map and draws. ``return_outcomes``: (rows, per-episode outcomes per row),
-    as evaluate_sweep."""
+    as evaluate_sweep; ``cells``: a CellStore (evaluate_sweep)."""
     rows, outcomes = [], []
     for source, perturbation, levels in plan:
         if progress is not None:
             progress.set_postfix(source=source, perturbation=perturbation)
-        r, o = evaluate_sweep(cfg, source, perturbation, levels, checkpoint, key, progress, True)
+        r, o = evaluate_sweep(
+            cfg, source, perturbation, levels, checkpoint, key, progress, True, cells
+        )
         rows += r
         outcomes += o
     return (rows, outcomes) if return_outcomes else rows

@@ -155,6 +155,28 @@ def write_integrity(step_dir: str) -> None:
     os.replace(tmp, os.path.join(step_dir, INTEGRITY_FILE))
 
 
+def policy_digest(path: str) -> str:
+    """SHA-256 (16 hex digits) of the policy files (params and normalizer) of the checkpoint an
+    evaluation loads from ``path`` (a run directory, its checkpoints/ folder or one step folder;
+    the latest finished step, as load_params_and_normalizer): equal digests, equal policies.
+
+    Raises:
+      FileNotFoundError if there is no finished checkpoint there."""
+    path = os.path.abspath(path)
+    if os.path.isdir(os.path.join(path, CHECKPOINT_SUBDIR)):
+        path = os.path.join(path, CHECKPOINT_SUBDIR)
+    if not (os.path.basename(path).isdigit() and os.path.isdir(path)):
+        steps = [int(d) for d in os.listdir(path) if d.isdigit()] if os.path.isdir(path) else []
+        if not steps:
+            raise FileNotFoundError(f"no checkpoint found in {path}")
+        path = os.path.join(path, str(max(steps)))
+    files = _file_digests(path)
+    kept = {k: v for k, v in files.items() if k.split(os.sep)[0] in ("params", "normalizer")}
+    if not kept:
+        raise FileNotFoundError(f"{path}: no params/normalizer files")
+    return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()[:16]
+
+
 def integrity_problem(step_dir: str) -> str | None:
     """Why the files of checkpoint folder ``step_dir`` do not match its integrity record (None:
     they match, or the checkpoint predates the record)."""

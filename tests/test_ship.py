@@ -79,6 +79,6 @@ def test_ship_refuses_a_damaged_step_and_an_oversized_folder_leaving_dest_alone(
     assert not os.path.exists(str(dest) + ".shipping")
 
 
-def test_ship_cli_names_a_run_without_checkpoints(tmp_path, capsys):
+def test_ship_cli_names_a_run_without_checkpoints(tmp_path):
     with pytest.raises(SystemExit, match=r"\[ship\] no finished checkpoint in .*empty"):
         ship_lib.main([str(tmp_path / "empty"), str(tmp_path / "dest")])

@@ -74,7 +74,11 @@ def ship(run_dir: str, dest: str, step: int | None = None, max_mb: float = DEFAU
     shutil.rmtree(new, ignore_errors=True)
     src_step = os.path.join(run_dir, CHECKPOINT_SUBDIR, str(step))
     dst_step = os.path.join(new, CHECKPOINT_SUBDIR, str(step))
-    shutil.copytree(src_step, dst_step)
+    try:
+        shutil.copytree(src_step, dst_step)
+    except (OSError, shutil.Error) as e:  # e.g. the running run rotated this step out meanwhile
+        shutil.rmtree(new, ignore_errors=True)
+        raise ValueError(f"copying {src_step} failed ({type(e).__name__}); run ship again") from e
     # The copy is checked against the run's record (a file the run rewrote meanwhile is caught);
     # a checkpoint from before the record existed gets one now.
     problem = integrity_problem(dst_step)

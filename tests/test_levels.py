@@ -82,3 +82,45 @@ def test_failure_feet_line_counts_each_foot():
 
     line = format_feet(np.array([-1, 0, 2, 2, 3, -1, 2]))  # -1: not a foot_stuck episode
     assert line.endswith("LF 1, RF 0, LH 3, RH 1")
+
+
+def test_gap_direction_on_hand_made_gaps():
+    """foottof.eval.failures.gap_direction on analytic terrains: 0 m stone, -1 m pit."""
+    import numpy as np
+
+    from foottof.eval.failures import GAP_DIRECTIONS, gap_direction
+
+    def terrain(pit):  # height function over (..., 2) points from a pit predicate of x, y
+        return lambda p: np.where(pit(np.asarray(p)[..., 0], np.asarray(p)[..., 1]), -1.0, 0.0)
+
+    crossing = terrain(lambda x, y: np.abs(x) < 0.1)  # 0.2 m gap across the path (x = 0)
+    along = terrain(lambda x, y: np.abs(y) < 0.1)  # 0.2 m gap along the course
+    junction = terrain(lambda x, y: (np.abs(x) < 0.1) | (np.abs(y) < 0.1))
+    hole = terrain(lambda x, y: (np.abs(x) < 0.1) & (np.abs(y) < 0.1))
+    wide = terrain(lambda x, y: np.abs(x) < 1.0)  # a 2 m pit: nothing within reach ahead/behind
+    feet = np.array([[0.0, 0.0], [0.05, -0.03]])  # centre of the gap and off-centre
+    for fn, want in [
+        (crossing, "crossing"),
+        (along, "along"),
+        (junction, "junction"),
+        (hole, "hole"),
+        (wide, "junction"),
+    ]:
+        got = [GAP_DIRECTIONS[i] for i in gap_direction(feet, fn)]
+        assert got == [want, want], (want, got)
+    # A crossing gap 0.37 m wide (two-row stones' widest) is still found bounded ahead and behind.
+    wide_crossing = terrain(lambda x, y: np.abs(x) < 0.185)
+    assert GAP_DIRECTIONS[gap_direction(np.zeros((1, 2)), wide_crossing)[0]] == "crossing"
+
+
+def test_gap_lines_count_per_type():
+    import numpy as np
+
+    from foottof.eval.failures import format_gaps
+
+    gap = np.array([0, 1, -1, 1, 2])
+    types = ["grid_stones", "grid_stones", "grid_stones", "mixed_row_stones", "platform_gap"]
+    lines = format_gaps(gap, types).splitlines()
+    assert lines[0] == "foot_stuck gaps, grid_stones: crossing 1, along 1, junction 0, hole 0"
+    assert lines[1] == "foot_stuck gaps, mixed_row_stones: crossing 0, along 1, junction 0, hole 0"
+    assert lines[-1] == "foot_stuck gaps, all: crossing 1, along 2, junction 1, hole 0"

@@ -11,6 +11,13 @@ which feet went into the gaps:
 - ``fell_base_low``: another failure with the base below the terrain's top (into a gap);
 - ``other_fall``: another failure (base or knee contact, flip, divergence);
 - ``timeout``: reached the deadline away from the goal (slow or stuck in place).
+
+For each ``foot_stuck`` episode it also says which way the gap that took the foot runs, from the
+terrain around that foot before the last step (:func:`gap_direction`; the course runs along +x):
+``crossing`` (stone ahead of and behind the foot, open to the sides: a gap across the path),
+``along`` (stone to both sides, open ahead and behind: a gap running along the course, between
+columns of stones), ``junction`` (open both ways: where gaps cross, or a wide pit) and
+``hole`` (stone all around).
 """
 
 from __future__ import annotations
@@ -20,6 +27,39 @@ import argparse
 import numpy as np
 
 CAUSES = ("success", "foot_stuck", "fell_base_low", "other_fall", "timeout")
+GAP_DIRECTIONS = ("crossing", "along", "junction", "hole")
+# Probe distances from the foot centre along +-x and +-y [m]: gaps of the stage-1 stones are
+# 0.05-0.37 m wide, so a foot anywhere in one has its stone within 0.3 m on a bounded side.
+GAP_PROBE_REACH_M = (0.04, 0.08, 0.12, 0.16, 0.2, 0.25, 0.3)
+GAP_STONE_STEP_M = 0.05  # terrain within this of the highest probed point counts as stone [m]
+
+
+def gap_direction(foot_xy, height_at) -> np.ndarray:
+    """(N,) index into GAP_DIRECTIONS of the gap around each foot.
+
+    Args:
+      foot_xy: (N, 2) foot centres (world x, y) [m]; the course runs along +x.
+      height_at: terrain height function, (..., 2) points -> (...) heights [m] (NumPy or JAX).
+
+    A side is bounded when stone (within GAP_STONE_STEP_M of the highest probed point around the
+    foot) lies within GAP_PROBE_REACH_M of the foot centre on it: bounded ahead and behind only
+    is ``crossing``, left and right only ``along``, neither ``junction`` (also where all probes
+    lie within GAP_STONE_STEP_M of one height: a pit wider than the reach), all four ``hole``.
+    """
+    foot_xy = np.asarray(foot_xy, np.float64).reshape(-1, 2)
+    r = np.asarray(GAP_PROBE_REACH_M)
+    dirs = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])  # +x, -x, +y, -y
+    pts = foot_xy[:, None, None, :] + dirs[None, :, None, :] * r[None, None, :, None]
+    h = np.asarray(height_at(pts), np.float64)  # (N, 4, R)
+    flat = h.reshape(len(foot_xy), -1)
+    top = flat.max(axis=1)
+    has_stone = top - flat.min(axis=1) > GAP_STONE_STEP_M  # else all pit (or all flat): open
+    stone = (h > (top - GAP_STONE_STEP_M)[:, None, None]).any(axis=2) & has_stone[:, None]
+    ahead_behind = stone[:, 0] & stone[:, 1]
+    sides = stone[:, 2] & stone[:, 3]
+    return np.select([ahead_behind & sides, ahead_behind, sides], [3, 0, 1], default=2).astype(
+        np.int64
+    )
 
 
 def classify(done, success, failed, stuck, base_z) -> np.ndarray:
@@ -43,7 +83,8 @@ def classify(done, success, failed, stuck, base_z) -> np.ndarray:
 
 def run(cfg, checkpoint: str, episodes: int, seed: int):
     """(cause per env, terrain type name per env, end step, progress at the end, the foot that
-    went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck)."""
+    went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
+    direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck)."""
     import jax
     import jax.numpy as jp
 
@@ -58,9 +99,9 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
     act = nets.policy_fn(params, norm, deterministic=True)
     step = jax.vmap(env.step)
 
-    def gap_depth(qpos):  # (4,) depth of each foot below the terrain around it, beside a gap
+    def feet(qpos):  # (4, 3) foot centres and (4,) depth below the terrain around, beside a gap
         foot_pos = world_foot_kinematics(qpos[:19], env.shank_scale).foot_pos
-        return foot_gap_depth(foot_pos, env.hfield.height_at)
+        return foot_pos, foot_gap_depth(foot_pos, env.hfield.height_at)
 
     @jax.jit
     def rollout(state):
@@ -71,13 +112,13 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
             m = s2.metrics
             rec = (s2.done, m["episode/success"], m["episode/failed"], m["episode/foot_stuck"])
             rec += (s.pipeline_state.qpos[:, 2], m["episode/progress"], s.info["task"].col)
-            rec += (jax.vmap(gap_depth)(s.pipeline_state.qpos),)  # before the step that ends it
+            rec += jax.vmap(feet)(s.pipeline_state.qpos)  # before the step that ends it
             return (s2, lstm, s2.done > 0.5), rec
 
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
         return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
 
-    done, succ, fail, stuck, base_z, prog, col, depth = (
+    done, succ, fail, stuck, base_z, prog, col, foot_pos, depth = (
         np.asarray(x) for x in jax.device_get(rollout(state))
     )
     cause = classify(done, succ, fail, stuck, base_z)
@@ -85,8 +126,12 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
     t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), done.shape[0] - 1)
     e = np.arange(episodes)
     types = np.asarray(env.tmap.col_type)[col[0]]
-    foot = np.where(cause == CAUSES.index("foot_stuck"), np.argmax(depth[t, e], axis=-1), -1)
-    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot
+    is_stuck = cause == CAUSES.index("foot_stuck")
+    foot = np.where(is_stuck, np.argmax(depth[t, e], axis=-1), -1)
+    xy = foot_pos[t, e, np.maximum(foot, 0), :2]  # (E, 2) the foot that went in
+    height_at = lambda p: np.asarray(env.hfield.height_at(jp.asarray(p, jp.float32)))  # noqa: E731
+    gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
+    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap
 
 
 def format_feet(foot: np.ndarray) -> str:
@@ -95,6 +140,21 @@ def format_feet(foot: np.ndarray) -> str:
 
     counts = ", ".join(f"{name} {int(np.sum(foot == i))}" for i, name in enumerate(FEET))
     return f"foot_stuck by foot (the deepest foot before the last step): {counts}"
+
+
+def format_gaps(gap: np.ndarray, types) -> str:
+    """One line per terrain type with foot_stuck episodes: how many went into a gap of each
+    GAP_DIRECTIONS direction (gap: -1 where the episode was not foot_stuck)."""
+    lines = []
+    for name in sorted(set(types)) + ["all"]:
+        sel = np.array([name in ("all", t) for t in types]) & (gap >= 0)
+        if not sel.any():
+            continue
+        counts = ", ".join(
+            f"{d} {int(np.sum(sel & (gap == i)))}" for i, d in enumerate(GAP_DIRECTIONS)
+        )
+        lines.append(f"foot_stuck gaps, {name}: {counts}")
+    return "\n".join(lines)
 
 
 def format_table(cause, types, end_step, progress) -> str:
@@ -136,9 +196,12 @@ def main(argv=None) -> None:
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     try:
-        *outcomes, foot = run(cfg, args.run_dir, args.episodes, args.seed)
-        print(format_table(*outcomes))
+        cause, types, end_step, progress, foot, gap = run(
+            cfg, args.run_dir, args.episodes, args.seed
+        )
+        print(format_table(cause, types, end_step, progress))
         print(format_feet(foot))
+        print(format_gaps(gap, types))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:
         raise SystemExit(f"error: {e}") from None
 

@@ -82,3 +82,22 @@ def test_ship_refuses_a_damaged_step_and_an_oversized_folder_leaving_dest_alone(
 def test_ship_cli_names_a_run_without_checkpoints(tmp_path):
     with pytest.raises(SystemExit, match=r"\[ship\] no finished checkpoint in .*empty"):
         ship_lib.main([str(tmp_path / "empty"), str(tmp_path / "dest")])
+
+
+def test_ship_copy_failure_names_the_step_and_leaves_dest_alone(run_dir, tmp_path, monkeypatch):
+    """The running run deletes (rotates out) the step while it is being copied: the ship fails
+    with a message naming that step, and neither DEST nor a half-copied folder is left changed."""
+    run, step = run_dir
+    dest = tmp_path / "stage1"
+    os.makedirs(dest / "checkpoints" / "7")
+    real_copytree = shutil.copytree
+
+    def rotated_out(src, dst, *args, **kwargs):
+        real_copytree(src, dst, *args, **kwargs)  # a part of the folder arrives, then it is gone
+        raise FileNotFoundError(2, "No such file or directory", os.path.join(src, "params"))
+
+    monkeypatch.setattr(ship_lib.shutil, "copytree", rotated_out)
+    with pytest.raises(ValueError, match=rf"copying .*checkpoints/{step} failed.*run ship again"):
+        ship_lib.ship(run, str(dest))
+    assert os.listdir(dest / "checkpoints") == ["7"]
+    assert not os.path.exists(str(dest) + ".shipping")

@@ -13,6 +13,7 @@ def get_section() -> ml_collections.ConfigDict:
     r.jump_grace_s = 0.2  # no jump penalty while the spawn drop lands [s]
     r.edge_radius_m = 0.04  # foot_edge: terrain sampled this far from the foot centre [m]
     r.edge_height_m = 0.05  # foot_edge: height spread of those samples that makes an edge [m]
+    r.clearance_target_m = 0.12  # foot_clearance: swing height asked of moving feet [m]
     r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
     s = ml_collections.ConfigDict()
     s.reach = 10.0  # sparse: +1 at the last step if within success_radius_m of the goal
@@ -34,5 +35,7 @@ def get_section() -> ml_collections.ConfigDict:
     )  # after reaching the goal: sum of squared deviations from the default pose [rad^2]
     s.collision = -1.0  # number of knee spheres touching the terrain (not a termination) [per s]
     s.foot_edge = 0.0  # number of feet touching the terrain at a height step (0 = off) [per s]
+    s.foot_clearance = 0.0  # moving feet below clearance_target_m: sum tanh(2|v|) shortfall^2
+    # (0 = off, and not computed) [m^2 per s]
     r.scales = s
     return r

@@ -22,7 +22,11 @@ METRICS = {
 # Config fields added after evaluations were made, with the default that reproduces the older
 # behaviour: draw fingerprints leave them out at that default (legacy_config_dict), so evaluations
 # from before the field existed still pair with ones made after.
-ADDED_FIELDS = {"reward.guidance_peaked": False}
+ADDED_FIELDS = {
+    "reward.guidance_peaked": False,
+    "reward.scales.foot_clearance": 0.0,  # off: the term is not computed
+    "reward.clearance_target_m": 0.12,  # read only when foot_clearance is on
+}
 # Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
 RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}
 

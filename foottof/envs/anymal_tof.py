@@ -123,6 +123,7 @@ class StepKinematics(NamedTuple):
     contact: jax.Array  # (4,) float 1 where a foot is within the contact margin
     gravity: jax.Array  # (3,) projected gravity (base frame)
     foot_edge: jax.Array  # (4,) feet touching the terrain at a height step
+    foot_clearance: jax.Array  # (4,) foot bottoms above the terrain under them (0 if unused) [m]
 
 
 class Ends(NamedTuple):
@@ -426,8 +427,14 @@ class AnymalToFEnv(Env):
         return d, action, jp.nan_to_num(taus), diverged
 
     def _step_kinematics(self, d) -> StepKinematics:
-        """Foot kinematics (analytic FK on the physics model), contacts, gravity, foot edges."""
+        """Foot kinematics (analytic FK on the physics model), contacts, gravity, foot edges and
+        (when reward.scales.foot_clearance is on) foot clearances."""
         fk, foot_vel = self._foot_kinematics(d)
+        clearance = jp.zeros(4)
+        if float(self.cfg.reward.scales.get("foot_clearance", 0.0)) != 0.0:  # static
+            clearance = rw.foot_clearances(
+                fk.foot_pos, self.hfield.height_at, self.foot_radius_m, self.spec.edge_radius_m
+            )
         return StepKinematics(
             fk=fk,
             foot_vel=foot_vel,
@@ -441,6 +448,7 @@ class AnymalToFEnv(Env):
                 self.spec.edge_radius_m,
                 self.spec.edge_height_m,
             ),
+            foot_clearance=clearance,
         )
 
     def _terminations(self, d, kin: StepKinematics, step, diverged) -> Ends:
@@ -474,6 +482,7 @@ class AnymalToFEnv(Env):
             truncated=ends.truncated.astype(jp.float32),
             knee_contact=ends.knee_contact,
             foot_edge=kin.foot_edge,
+            foot_clearance=kin.foot_clearance,
         )
         terms = rw.scaled_terms(
             rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt

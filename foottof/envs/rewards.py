@@ -19,6 +19,7 @@ DENSE_TERMS = (
     "posture",
     "collision",
     "foot_edge",
+    "foot_clearance",
 )
 SPARSE_TERMS = ("reach", "termination")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
@@ -43,6 +44,8 @@ class RewardInputs:
       failed: 1.0 on a failure termination; truncated: 1.0 at the time limit.
       knee_contact: (4,) 1.0 where a knee sphere touches the terrain.
       foot_edge: (4,) 1.0 where a foot touches the terrain next to a height step (`foot_edges`).
+      foot_clearance: (4,) height of each foot's bottom above the highest terrain around it
+        (`foot_clearances`) [m]; zeros where the foot_clearance term is off.
     """
 
     base_pos: jax.Array
@@ -63,6 +66,7 @@ class RewardInputs:
     truncated: jax.Array
     knee_contact: jax.Array
     foot_edge: jax.Array
+    foot_clearance: jax.Array
 
 
 def foot_edges(
@@ -96,6 +100,27 @@ def foot_edges(
     touching = foot_pos[:, 2] - top < foot_radius_m + contact_margin_m
     spread = top - jp.min(heights, axis=-1)
     return (touching & (spread > edge_height_m)).astype(jp.float32)
+
+
+def foot_clearances(
+    foot_pos: jax.Array, height_at, foot_radius_m: float, edge_radius_m: float
+) -> jax.Array:
+    """(4,) height of each foot's bottom above the highest terrain under it [m].
+
+    The terrain is sampled where ``foot_edges`` samples it (under the foot centre and
+    ``edge_radius_m`` away along +-x, +-y), so a foot swinging past the rim of a stone is measured
+    from the rim, and one over the middle of a gap from the gap's floor (no clearance is owed there).
+
+    Args:
+      foot_pos: (4, 3) world foot-centre positions [m].
+      height_at: terrain height lookup, (..., 2) xy -> (...) z [m] (Heightfield.height_at).
+      foot_radius_m: foot sphere radius [m].
+      edge_radius_m: horizontal distance of the four side samples from the foot centre [m].
+    """
+    r = float(edge_radius_m)
+    offsets = jp.array([[0.0, 0.0], [r, 0.0], [-r, 0.0], [0.0, r], [0.0, -r]], jp.float32)
+    top = jp.max(height_at(foot_pos[:, None, :2] + offsets[None]), axis=-1)  # (4,)
+    return foot_pos[:, 2] - foot_radius_m - top
 
 
 def goal_distance(x: RewardInputs) -> jax.Array:
@@ -139,6 +164,13 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
         "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
         "collision": jp.sum(x.knee_contact),
         "foot_edge": jp.sum(x.foot_edge),
+        # Isaac Lab's foot_clearance_reward (Spot), as a penalty on the shortfall only and from
+        # the terrain under the foot: sum over feet of tanh(2 |v_xy|) max(0, target - clearance)^2,
+        # so moving (swinging) feet are asked to lift to the target and standing feet not.
+        "foot_clearance": jp.sum(
+            jp.tanh(2.0 * jp.sqrt(foot_speed_sq))
+            * jp.square(jp.maximum(rcfg.get("clearance_target_m", 0.12) - x.foot_clearance, 0.0))
+        ),
     }
 
 

@@ -69,6 +69,13 @@ class RewardInputs:
     foot_clearance: jax.Array
 
 
+def _probe_heights(foot_pos: jax.Array, height_at, radius_m: float) -> jax.Array:
+    """(4, 5) terrain heights under each foot centre and ``radius_m`` away along +-x, +-y."""
+    r = float(radius_m)
+    offsets = jp.array([[0.0, 0.0], [r, 0.0], [-r, 0.0], [0.0, r], [0.0, -r]], jp.float32)
+    return height_at(foot_pos[:, None, :2] + offsets[None])
+
+
 def foot_edges(
     foot_pos: jax.Array,
     height_at,
@@ -93,9 +100,7 @@ def foot_edges(
       edge_radius_m: horizontal distance of the four side samples from the foot centre [m].
       edge_height_m: height spread that makes an edge [m].
     """
-    r = float(edge_radius_m)
-    offsets = jp.array([[0.0, 0.0], [r, 0.0], [-r, 0.0], [0.0, r], [0.0, -r]], jp.float32)
-    heights = height_at(foot_pos[:, None, :2] + offsets[None])  # (4, 5)
+    heights = _probe_heights(foot_pos, height_at, edge_radius_m)  # (4, 5)
     top = jp.max(heights, axis=-1)
     touching = foot_pos[:, 2] - top < foot_radius_m + contact_margin_m
     spread = top - jp.min(heights, axis=-1)
@@ -117,9 +122,7 @@ def foot_clearances(
       foot_radius_m: foot sphere radius [m].
       edge_radius_m: horizontal distance of the four side samples from the foot centre [m].
     """
-    r = float(edge_radius_m)
-    offsets = jp.array([[0.0, 0.0], [r, 0.0], [-r, 0.0], [0.0, r], [0.0, -r]], jp.float32)
-    top = jp.max(height_at(foot_pos[:, None, :2] + offsets[None]), axis=-1)  # (4,)
+    top = jp.max(_probe_heights(foot_pos, height_at, edge_radius_m), axis=-1)  # (4,)
     return foot_pos[:, 2] - foot_radius_m - top
 
 

@@ -181,6 +181,8 @@ RULES = {
     "terrain.up_progress_frac": _frac,
     "terrain.flat": _bool,
     "terrain.no_promotion_on_fall": _bool,
+    "terrain.stretch_prob": _frac,
+    "terrain.stretch_min_level": _int(0),  # the env clips it to num_levels - 1
     # sensor, noise
     "sensor.sites": _non_empty_strs,
     "sensor.grid": _choice(*TOF_MAX_RATE_HZ),

@@ -173,6 +173,42 @@ def test_sparse_reward_at_timeout(env, fns, offset_m, expect):
         assert int(state.info["task"].level[0]) == max(level0 - 1, 0)
 
 
+def test_stretch_episode_keeps_the_curriculum_level(env, fns):
+    """terrain.stretch_prob = 1: every new episode plays the top row; an episode that was played
+    on another row than its curriculum level ends without moving that level."""
+    cfg = _cfg()
+    cfg.terrain.stretch_prob = 1.0
+    cfg.terrain.stretch_min_level = 1  # the top row of this two-row map
+    senv = make_env(cfg)
+    np.testing.assert_array_equal(np.asarray(senv.tmap.spawn), np.asarray(env.tmap.spawn))
+    sstep = jax.jit(jax.vmap(senv.step))
+    reset, step = fns
+    state = reset(jax.random.split(jax.random.PRNGKey(9), NUM_ENVS))
+    spawns = jp.asarray(env.tmap.spawn)  # (rows, cols, 4)
+    # Both envs end at the deadline where they spawned, far from their goals (progress < 0.5).
+    # env 0: curriculum level 1, played on row 0 (a stretch episode): the plain curriculum
+    # demotes it, the stretch rule keeps it. env 1: level 0, played on row 1.
+    for i, (level, row) in enumerate(((1, 0), (0, 1))):
+        at = spawns[row, int(state.info["task"].col[i])]
+        qpos = state.pipeline_state.qpos.at[i, 0:2].set(at[:2])
+        state = state.replace(pipeline_state=state.pipeline_state.replace(qpos=qpos))
+        state = _with(state, i, level=level, spawn=at, step=env.episode_steps - 1)
+    zeros = jp.zeros((NUM_ENVS, 12))
+    plain, stretched = step(state, zeros), sstep(state, zeros)
+    assert np.all(np.asarray(plain.done[:2]) == 1.0) and np.all(np.asarray(stretched.done[:2]) == 1)
+    np.testing.assert_array_equal(np.asarray(plain.info["task"].level[:2]), [0, 0])
+    np.testing.assert_array_equal(np.asarray(stretched.info["task"].level[:2]), [1, 0])
+
+    def rows(s):  # the row each new episode was spawned on (nearest nominal spawn)
+        new = np.asarray(s.info["task"].spawn[:2, :2])
+        cols = np.asarray(s.info["task"].col[:2])
+        nominal = np.asarray(spawns)[:, cols, :2].transpose(1, 0, 2)
+        return np.argmin(np.sum((nominal - new[:, None]) ** 2, axis=-1), axis=-1)
+
+    np.testing.assert_array_equal(rows(plain), [0, 0])  # their curriculum levels
+    np.testing.assert_array_equal(rows(stretched), [1, 1])  # the stretch row, whatever the level
+
+
 def test_auto_reset_restores_valid_state_and_leaves_others(env, fns):
     reset, step = fns
     state = reset(jax.random.split(jax.random.PRNGKey(5), NUM_ENVS))

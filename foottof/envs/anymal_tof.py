@@ -73,6 +73,8 @@ class TaskSpec:
     down_progress_frac: float
     up_progress_frac: float
     no_promotion_on_fall: bool
+    stretch_prob: float
+    stretch_min_level: int
     init_level_max: int
     init_joint_noise_rad: float
     init_roll_pitch_rad: float
@@ -106,6 +108,8 @@ class TaskSpec:
             down_progress_frac=float(t.down_progress_frac),
             up_progress_frac=float(t.up_progress_frac),
             no_promotion_on_fall=bool(t.get("no_promotion_on_fall", False)),
+            stretch_prob=float(t.get("stretch_prob", 0.0)),
+            stretch_min_level=int(t.get("stretch_min_level", 0)),
             init_level_max=int(t.init_level_max),
             init_joint_noise_rad=float(e.init_joint_noise_rad),
             init_roll_pitch_rad=float(e.init_roll_pitch_rad),
@@ -500,7 +504,17 @@ class AnymalToFEnv(Env):
         on the tile the curriculum picks (keeping the env's evaluation perturbation)."""
         cont = task.replace(rng=rng, step=step, last_action=action, last_qvel=d.qvel[6:18])
         new_level, new_col = self._curriculum(key_reset, task, d.qpos[0:2], success, ends.failed)
-        fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
+        play_level = new_level
+        if self.spec.stretch_prob > 0:  # static: some episodes on a stretch tile (terrain.stretch_*)
+            play_level = curriculum.stretch_levels(
+                jax.random.fold_in(key_reset, 1),
+                new_level,
+                self.spec.stretch_prob,
+                self.spec.stretch_min_level,
+                self.tmap.num_levels,
+            )
+        fresh_d, fresh_task = self._reset_core(key_reset, play_level, new_col)
+        fresh_task = fresh_task.replace(level=jp.asarray(new_level, jp.int32))
         fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
         return select_where(ends.done, fresh_d, d), select_where(ends.done, fresh_task, cont)
 
@@ -565,6 +579,10 @@ class AnymalToFEnv(Env):
             up_progress_frac=self.spec.up_progress_frac,
             failed=failed if self.spec.no_promotion_on_fall else None,
         )
+        if self.spec.stretch_prob > 0:  # a stretch episode leaves the curriculum level as it was
+            nominal = jp.asarray(self.tmap.spawn)[:, task.col, :2]
+            stretched = curriculum.played_rows(task.spawn[:2], nominal) != task.level
+            level = jp.where(stretched, task.level, level)
         return level, task.col
 
     def _reset_episode(self, key, level, col, overrides: dict | None = None) -> State:

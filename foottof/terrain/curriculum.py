@@ -81,3 +81,50 @@ def update_levels(
     random_level = jax.random.randint(key, level.shape, 0, num_levels, dtype=jp.int32)
     new = jp.where(new >= num_levels, random_level, jp.maximum(new, 0))
     return jp.where(jp.asarray(done, bool), new, level)
+
+
+def stretch_levels(
+    key: jax.Array, level: jax.Array, stretch_prob: float, min_level: int, num_levels: int
+) -> jax.Array:
+    """The tile level each env plays next: its curriculum level, or with probability
+    ``stretch_prob`` a *stretch* level ~ U{min_level, ..., num_levels - 1}.
+
+    A stretch episode shows the policy terrain beyond its curriculum (the evaluation ensemble's
+    small stones sit at the top levels, which the curriculum may take very long to reach); the env
+    keeps the curriculum level as it was (:func:`played_rows` tells the stretch episodes apart).
+
+    Args:
+      key: PRNG key.
+      level: (N,) or () int curriculum levels.
+      stretch_prob: probability of a stretch episode (static), in [0, 1].
+      min_level: lowest stretch level (static); clipped to num_levels - 1.
+      num_levels: number of levels (static).
+
+    Returns:
+      int32 tile levels, shaped like ``level``.
+    """
+    _check_levels(num_levels)
+    if not 0.0 <= stretch_prob <= 1.0:
+        raise ValueError(f"stretch_prob={stretch_prob!r} outside the valid range [0, 1]")
+    if int(min_level) != min_level or min_level < 0:
+        raise ValueError(f"stretch min_level={min_level!r} must be an integer >= 0")
+    level = jp.asarray(level, jp.int32)
+    lo = min(int(min_level), num_levels - 1)
+    k_pick, k_level = jax.random.split(key)
+    pick = jax.random.uniform(k_pick, level.shape) < stretch_prob
+    stretch = jax.random.randint(k_level, level.shape, lo, num_levels, dtype=jp.int32)
+    return jp.where(pick, stretch, level)
+
+
+def played_rows(spawn_xy: jax.Array, nominal_spawn_xy: jax.Array) -> jax.Array:
+    """The map row (level) an episode was spawned on: the nearest nominal spawn of its column.
+
+    Args:
+      spawn_xy: (..., 2) the episode's spawn x, y [m].
+      nominal_spawn_xy: (..., L, 2) the nominal spawn of every row of the episode's column [m].
+
+    Returns:
+      (...) int32 row index.
+    """
+    d2 = jp.sum(jp.square(nominal_spawn_xy - spawn_xy[..., None, :]), axis=-1)
+    return jp.argmin(d2, axis=-1).astype(jp.int32)

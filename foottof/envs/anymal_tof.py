@@ -505,7 +505,8 @@ class AnymalToFEnv(Env):
         cont = task.replace(rng=rng, step=step, last_action=action, last_qvel=d.qvel[6:18])
         new_level, new_col = self._curriculum(key_reset, task, d.qpos[0:2], success, ends.failed)
         play_level = new_level
-        if self.spec.stretch_prob > 0:  # static: some episodes on a stretch tile (terrain.stretch_*)
+        # static: some episodes on a stretch tile (terrain.stretch_*)
+        if self.spec.stretch_prob > 0:
             play_level = curriculum.stretch_levels(
                 jax.random.fold_in(key_reset, 1),
                 new_level,

@@ -26,6 +26,8 @@ ADDED_FIELDS = {
     "reward.guidance_peaked": False,
     "reward.scales.foot_clearance": 0.0,  # off: the term is not computed
     "reward.clearance_target_m": 0.12,  # read only when foot_clearance is on
+    "terrain.stretch_prob": 0.0,  # off: every episode on its curriculum level's row
+    "terrain.stretch_min_level": 7,  # read only when stretch_prob is on
 }
 # Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
 RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}

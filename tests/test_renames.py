@@ -142,6 +142,9 @@ def test_draw_fingerprint_is_kept_across_the_rename():
     cfg.eval.num_envs, cfg.eval.seed, cfg.eval.episodes = 200, 4242, 200
     cfg.eval.difficulty_fraction = 0.125
     assert results.episode_draws(cfg) == doc["draws"]
+    cfg.terrain.stretch_prob = 0.2  # an added field counts away from its old-behaviour default
+    assert results.draws_fingerprint(cfg) != doc["draws"]["fingerprint"]
+    cfg.terrain.stretch_prob = 0.0
     cfg.reward.stall_speed_mps = 0.2  # a renamed field still counts
     assert results.draws_fingerprint(cfg) != doc["draws"]["fingerprint"]
     back = renames.legacy_config_dict(

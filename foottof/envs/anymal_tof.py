@@ -109,7 +109,7 @@ class TaskSpec:
             up_progress_frac=float(t.up_progress_frac),
             no_promotion_on_fall=bool(t.get("no_promotion_on_fall", False)),
             stretch_prob=float(t.get("stretch_prob", 0.0)),
-            stretch_min_level=int(t.get("stretch_min_level", 0)),
+            stretch_min_level=int(t.get("stretch_min_level", 7)),
             init_level_max=int(t.init_level_max),
             init_joint_noise_rad=float(e.init_joint_noise_rad),
             init_roll_pitch_rad=float(e.init_roll_pitch_rad),
@@ -515,7 +515,8 @@ class AnymalToFEnv(Env):
                 self.tmap.num_levels,
             )
         fresh_d, fresh_task = self._reset_core(key_reset, play_level, new_col)
-        fresh_task = fresh_task.replace(level=jp.asarray(new_level, jp.int32))
+        if self.spec.stretch_prob > 0:  # the env keeps its curriculum level, not the played row
+            fresh_task = fresh_task.replace(level=jp.asarray(new_level, jp.int32))
         fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
         return select_where(ends.done, fresh_d, d), select_where(ends.done, fresh_task, cont)
 

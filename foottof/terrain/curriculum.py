@@ -91,7 +91,8 @@ def stretch_levels(
 
     A stretch episode shows the policy terrain beyond its curriculum (the evaluation ensemble's
     small stones sit at the top levels, which the curriculum may take very long to reach); the env
-    keeps the curriculum level as it was (:func:`played_rows` tells the stretch episodes apart).
+    keeps the curriculum level as it was (:func:`played_rows` tells the stretch episodes apart; a
+    stretch draw that hits the env's own level is an ordinary episode of that level).
 
     Args:
       key: PRNG key.

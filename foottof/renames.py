@@ -29,6 +29,16 @@ ADDED_FIELDS = {
     "terrain.stretch_prob": 0.0,  # off: every episode on its curriculum level's row
     "terrain.stretch_min_level": 7,  # read only when stretch_prob is on
 }
+
+
+def added_default(field: str):
+    """The old-behaviour default of an ADDED_FIELDS entry (dotted path): what code reading a
+    config saved before the field existed falls back to, so that fallback is written once."""
+    if field not in ADDED_FIELDS:
+        raise KeyError(f"{field!r} is not an added field; added fields: {sorted(ADDED_FIELDS)}")
+    return ADDED_FIELDS[field]
+
+
 # Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
 RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}
 

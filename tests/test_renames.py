@@ -151,3 +151,57 @@ def test_draw_fingerprint_is_kept_across_the_rename():
         renames.migrate_config_dict({"reward": {"stall_speed_ms": 1}})
     )
     assert back == {"reward": {"stall_speed_ms": 1}}
+
+
+def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
+    """A run config saved before the ADDED_FIELDS existed (the fields deleted) builds the same
+    TaskSpec and reward terms as one holding them at their old-behaviour defaults: the env's
+    fallbacks are renames.added_default, written once."""
+    import jax.numpy as jp
+    import ml_collections
+
+    from foottof.envs import rewards
+    from foottof.envs.anymal_tof import TaskSpec
+
+    cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
+    for field in renames.ADDED_FIELDS:  # every added field is a field of the current config
+        _leaf(cfg.to_dict(), field)
+    at_default = cfg.to_dict()
+    for field, default in renames.ADDED_FIELDS.items():
+        *path, leaf = field.split(".")
+        parent = at_default
+        for k in path:
+            parent = parent[k]
+        parent[leaf] = default
+    saved_before = json.loads(json.dumps(at_default))
+    for field in renames.ADDED_FIELDS:
+        *path, leaf = field.split(".")
+        parent = saved_before
+        for k in path:
+            parent = parent[k]
+        del parent[leaf]
+    old = ml_collections.ConfigDict(saved_before)
+    new = ml_collections.ConfigDict(at_default)
+    at_default["terrain"]["stretch_min_level"] = 5  # away from the default: the specs differ
+    assert TaskSpec.from_config(old) == TaskSpec.from_config(new)
+    assert TaskSpec.from_config(old) != TaskSpec.from_config(ml_collections.ConfigDict(at_default))
+
+    from foottof import constants
+
+    pose = jp.asarray(constants.DEFAULT_POSE)  # swinging feet below the clearance target
+    x = rewards.RewardInputs(
+        **dict(base_pos=jp.array([0.0, 0.0, 0.6]), base_lin_vel=jp.array([0.8, 0.0, 0.0])),
+        **dict(goal_xy=jp.array([3.0, 0.0]), projected_gravity=jp.array([0.0, 0.0, -1.0])),
+        **{k: jp.zeros(12) for k in ("torques", "qvel", "last_qvel", "action", "last_action")},
+        **dict(foot_vel=jp.ones((4, 3)), foot_contact=jp.zeros(4), q=pose, default_q=pose),
+        **dict(time_s=jp.asarray(5.0), failed=jp.asarray(0.0), truncated=jp.asarray(0.0)),
+        **dict(knee_contact=jp.zeros(4), foot_edge=jp.zeros(4), foot_clearance=jp.full(4, 0.02)),
+    )
+    terms = lambda c: rewards.compute_terms(x, c.reward, 0.02)  # noqa: E731
+    assert float(terms(new)["foot_clearance"]) > 0.0
+    for name, value in terms(old).items():
+        assert jp.allclose(value, terms(new)[name]), name
+    new.reward.clearance_target_m = 0.2  # away from the default: the term differs
+    assert not jp.allclose(terms(old)["foot_clearance"], terms(new)["foot_clearance"])
+    with pytest.raises(KeyError, match="not an added field"):
+        renames.added_default("terrain.num_levels")

@@ -19,6 +19,7 @@ from foottof.envs.sensing import select_where
 from foottof.perception import check_source
 from foottof.perception.odometry import noisy_odometry
 from foottof.physics import make_physics
+from foottof.renames import added_default
 from foottof.robot import kinematics
 from foottof.robot.model import (
     BASE_SPHERE_CENTRES_M,
@@ -108,8 +109,10 @@ class TaskSpec:
             down_progress_frac=float(t.down_progress_frac),
             up_progress_frac=float(t.up_progress_frac),
             no_promotion_on_fall=bool(t.get("no_promotion_on_fall", False)),
-            stretch_prob=float(t.get("stretch_prob", 0.0)),
-            stretch_min_level=int(t.get("stretch_min_level", 7)),
+            stretch_prob=float(t.get("stretch_prob", added_default("terrain.stretch_prob"))),
+            stretch_min_level=int(
+                t.get("stretch_min_level", added_default("terrain.stretch_min_level"))
+            ),
             init_level_max=int(t.init_level_max),
             init_joint_noise_rad=float(e.init_joint_noise_rad),
             init_roll_pitch_rad=float(e.init_roll_pitch_rad),
@@ -435,7 +438,10 @@ class AnymalToFEnv(Env):
         (when reward.scales.foot_clearance is on) foot clearances."""
         fk, foot_vel = self._foot_kinematics(d)
         clearance = jp.zeros(4)
-        if float(self.cfg.reward.scales.get("foot_clearance", 0.0)) != 0.0:  # static
+        clearance_scale = self.cfg.reward.scales.get(
+            "foot_clearance", added_default("reward.scales.foot_clearance")
+        )
+        if float(clearance_scale) != 0.0:  # static
             clearance = rw.foot_clearances(
                 fk.foot_pos, self.hfield.height_at, self.foot_radius_m, self.spec.edge_radius_m
             )

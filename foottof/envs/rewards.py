@@ -6,6 +6,8 @@ import jax
 import jax.numpy as jp
 from flax import struct
 
+from foottof.renames import added_default
+
 # Terms that are rates (multiplied by the control dt) vs. events (counted once).
 DENSE_TERMS = (
     "guidance",
@@ -146,12 +148,14 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
     vmax = rcfg.guidance_max_speed_mps
     # Dense guidance: speed toward the goal (clipped); full credit once within the success radius.
     paid = jp.clip(v_toward, -vmax, vmax)
-    if rcfg.get("guidance_peaked", False):  # static: above vmax the pay falls as it rose
+    peaked = rcfg.get("guidance_peaked", added_default("reward.guidance_peaked"))
+    if peaked:  # static: above vmax the pay falls as it rose
         paid = jp.where(v_toward > vmax, jp.maximum(2.0 * vmax - v_toward, -vmax), paid)
     guidance = jp.where(at_goal > 0, vmax, paid)
     speed = jp.linalg.norm(x.base_lin_vel[:2])
     stalling = (speed < rcfg.stall_speed_mps) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
+    target = rcfg.get("clearance_target_m", added_default("reward.clearance_target_m"))
     return {
         "reach": x.truncated * at_goal,
         "termination": x.failed,
@@ -172,7 +176,7 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
         # so moving (swinging) feet are asked to lift to the target and standing feet not.
         "foot_clearance": jp.sum(
             jp.tanh(2.0 * jp.sqrt(foot_speed_sq))
-            * jp.square(jp.maximum(rcfg.get("clearance_target_m", 0.12) - x.foot_clearance, 0.0))
+            * jp.square(jp.maximum(target - x.foot_clearance, 0.0))
         ),
     }
 

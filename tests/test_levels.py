@@ -124,3 +124,63 @@ def test_gap_lines_count_per_type():
     assert lines[0] == "foot_stuck gaps, grid_stones: crossing 1, along 1, junction 0, hole 0"
     assert lines[1] == "foot_stuck gaps, mixed_row_stones: crossing 0, along 1, junction 0, hole 0"
     assert lines[-1] == "foot_stuck gaps, all: crossing 1, along 2, junction 1, hole 0"
+
+
+def test_sightings_on_hand_made_rays():
+    """foottof.eval.failures.sightings: rays from a sensor 0.1 m above the stone-top plane z = 0,
+    hit distances set by hand (the hand-computed crossing of a 45-degree ray is x = 0.1 m)."""
+    import numpy as np
+
+    from foottof.eval.failures import sightings
+
+    o = np.array([[0.0, 0.0, 0.1]])  # one sensor
+    s45 = np.sqrt(0.5)
+    down, slant, up = [0.0, 0.0, -1.0], [s45, 0.0, -s45], [0.0, 0.0, 1.0]
+    d = np.array([[down, slant, up]])  # (F=1, R=3, 3)
+
+    def see(spot, t_hit, origin=o, top=0.0):
+        looked, gap = sightings(spot, top, origin, d, np.array([t_hit]), max_range_m=1.0)
+        return bool(looked[0]), bool(gap[0])
+
+    assert see([0.0, 0.0], [0.1, -1, -1]) == (True, False)  # stone under the sensor
+    assert see([0.0, 0.0], [0.9, -1, -1]) == (True, True)  # 0.8 m below the tops: a gap
+    assert see([0.0, 0.0], [-1, -1, -1]) == (True, True)  # nothing within range: a gap
+    assert see([0.0, 0.0], [0.12, -1, -1]) == (True, False)  # 2 cm beyond: still stone
+    assert see([0.1, 0.0], [0.1, -1, -1]) == (True, True)  # the slant ray looked at x = 0.1
+    assert see([0.1, 0.0], [0.1, 0.1414, -1]) == (True, False)  # ... and hit the stone there
+    assert see([0.1, 0.0], [0.1, 0.05, -1]) == (False, False)  # ... stopped by an edge before
+    assert see([0.3, 0.0], [0.1, -1, -1]) == (False, False)  # no ray crossed near x = 0.3
+    assert see([0.0, 0.0], [-1, -1, -1], origin=o + [0, 0, 0.9]) == (False, False)  # out of range
+    many = sightings(
+        [0.0, 0.0],
+        0.0,
+        np.zeros((5, 1, 3)) + o,
+        np.broadcast_to(d, (5, 1, 3, 3)),
+        np.full((5, 1, 3), -1.0),
+        1.0,
+    )
+    assert many[0].shape == (5, 1) and many[1].all()  # leading axes (steps) are kept
+
+
+def test_sighting_summary_counts_steps_before_the_drop():
+    import numpy as np
+
+    from foottof.eval.failures import SIGHT_WINDOW_STEPS, sighting_summary
+
+    foot_z = np.array([0.03] * 10 + [-0.05, -0.2, -0.4])  # on the tops until step 9
+    gap = np.zeros((13, 2), bool)
+    gap[4, 1] = gap[6, 0] = True
+    looked = gap.copy()
+    looked[2, 0] = True
+    # the foot stood (centre 3 cm above the tops: bottom on them), then slid in
+    assert sighting_summary(foot_z, 0.0, 12, looked, gap) == (9, 5, 7, False)
+    assert sighting_summary(foot_z, 0.0, 12, looked, np.zeros_like(gap)) == (9, -1, 7, False)
+    lifted = foot_z.copy()
+    lifted[5] = 0.09  # bottom 5.85 cm above the tops 4 steps before the drop: a swing
+    assert sighting_summary(lifted, 0.0, 12, looked, gap)[3]
+    lifted[5] = 0.045  # 1.35 cm: still standing (within SWING_LIFT_M)
+    assert not sighting_summary(lifted, 0.0, 12, looked, gap)[3]
+    long_z = np.concatenate([np.full(SIGHT_WINDOW_STEPS + 11, 0.03), [-0.3]])
+    early = np.zeros((len(long_z), 1), bool)
+    early[0] = True  # seen 60 steps before the drop: outside the window
+    assert sighting_summary(long_z, 0.0, len(long_z) - 1, early, early) == (60, -1, -1, False)

@@ -18,6 +18,12 @@ terrain around that foot before the last step (:func:`gap_direction`; the course
 ``along`` (stone to both sides, open ahead and behind: a gap running along the course, between
 columns of stones), ``junction`` (open both ways: where gaps cross, or a wide pit) and
 ``hole`` (stone all around).
+
+With ``--sightings`` it also asks whether the robot could have known: for each ``foot_stuck``
+episode, did any foot sensor's ray look at the spot where the foot went in during the second
+before it dropped below the stone tops, and did that ray see a gap there (:func:`sightings`)?
+A spot never looked at is a limit of the sensor's coverage; one seen as a gap and stepped into
+anyway is a limit of the policy.
 """
 
 from __future__ import annotations
@@ -62,6 +68,69 @@ def gap_direction(foot_xy, height_at) -> np.ndarray:
     )
 
 
+SIGHT_RADIUS_M = 0.08  # a ray looked at a spot when it crossed the stone-top plane this near [m]
+SIGHT_BEYOND_M = 0.05  # ... and saw a gap there when it hit this far beyond the plane, or nothing
+SIGHT_WINDOW_STEPS = 50  # how far back before the foot dropped to look for sightings (1 s)
+SWING_LOOKBACK_STEPS = 10  # a foot stepped in when it was in the air in the 0.2 s before the drop
+SWING_LIFT_M = 0.02  # ... with its bottom this far above the stone tops (else it slid off) [m]
+
+
+def sightings(spot_xy, top_z, origins, dirs, t_hit, max_range_m: float):
+    """Which rays looked at a spot on the stone-top plane and which of them saw a gap there.
+
+    A ray (origin o, unit direction d pointing down) crosses the plane z = ``top_z`` at
+    s = (top_z - o_z) / d_z; it looked at the spot when that crossing lies within SIGHT_RADIUS_M
+    of ``spot_xy``, within the sensor's range, and the ray was not stopped before it (hit at
+    t >= s - 2 cm, or no hit). It saw a gap there when it hit more than SIGHT_BEYOND_M beyond the
+    plane or nothing within range (the terrain under the spot lies below the stone tops).
+
+    Args:
+      spot_xy: (2,) the spot [m]; top_z: the stone-top height around it [m].
+      origins: (..., F, 3) sensor origins [m]; dirs: (..., F, R, 3) unit ray directions.
+      t_hit: (..., F, R) hit distances [m], negative where nothing was hit within range.
+      max_range_m: the sensor's range [m].
+
+    Returns:
+      (looked, gap): (..., F) bool per sensor: some ray looked at the spot / saw a gap there.
+    """
+    o = np.asarray(origins, np.float64)[..., None, :]  # (..., F, 1, 3)
+    d = np.asarray(dirs, np.float64)
+    t = np.asarray(t_hit, np.float64)
+    down = d[..., 2] < -1e-6
+    s = np.where(down, (top_z - o[..., 2]) / np.where(down, d[..., 2], -1.0), np.inf)
+    cross = o[..., :2] + s[..., None] * d[..., :2]
+    near = np.linalg.norm(cross - np.asarray(spot_xy, np.float64), axis=-1) < SIGHT_RADIUS_M
+    in_range = (s > 0.0) & (s < max_range_m - SIGHT_BEYOND_M)
+    no_hit = t < 0.0
+    looked = near & in_range & (no_hit | (t >= s - 0.02))
+    gap = looked & (no_hit | (t > s + SIGHT_BEYOND_M))
+    return looked.any(axis=-1), gap.any(axis=-1)
+
+
+def sighting_summary(foot_z, top_z, end_step, looked, gap) -> tuple[int, int, int, bool]:
+    """For one foot_stuck episode: (step the foot dropped: the last one before the end with its
+    centre at or above ``top_z``, steps before it that some sensor first saw a gap at the spot
+    within SIGHT_WINDOW_STEPS (-1: never), the same for the first look at the spot, whether the
+    foot stepped in from a swing: its bottom rose more than SWING_LIFT_M above the stone tops in
+    the SWING_LOOKBACK_STEPS before the drop; else it slid off an edge it stood on).
+
+    foot_z: (T,) the stuck foot's centre height [m]; looked, gap: (T, F) from :func:`sightings`."""
+    from foottof.constants import FOOT_RADIUS_M
+
+    foot_z = np.asarray(foot_z)
+    above = np.nonzero(foot_z[: end_step + 1] >= top_z)[0]
+    drop = int(above[-1]) if above.size else 0
+    lo = max(0, drop - SIGHT_WINDOW_STEPS)
+
+    def lead(hits):
+        steps = np.nonzero(np.asarray(hits)[lo : drop + 1].any(axis=-1))[0]
+        return int(drop - (lo + steps[0])) if steps.size else -1
+
+    recent = foot_z[max(0, drop - SWING_LOOKBACK_STEPS) : drop + 1]
+    swung = bool(recent.max() - FOOT_RADIUS_M - top_z > SWING_LIFT_M)
+    return drop, lead(gap), lead(looked), swung
+
+
 def classify(done, success, failed, stuck, base_z) -> np.ndarray:
     """(E,) cause index into CAUSES of each env's first episode, from (T, E) step records; an
     env whose episode did not end within T steps counts as a timeout."""
@@ -81,16 +150,20 @@ def classify(done, success, failed, stuck, base_z) -> np.ndarray:
     )
 
 
-def run(cfg, checkpoint: str, episodes: int, seed: int):
+def run(cfg, checkpoint: str, episodes: int, seed: int, sight: bool = False):
     """(cause per env, terrain type name per env, end step, progress at the end, the foot that
     went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
-    direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck)."""
+    direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck) and, with
+    ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
+    swing) row per foot_stuck episode (:func:`sighting_summary`; the own-sensor lead from the
+    stuck foot's sensor alone), else None."""
     import jax
     import jax.numpy as jp
 
     from foottof.envs.anymal_tof import foot_gap_depth
     from foottof.eval.harness import make_eval_env_and_policy
     from foottof.robot.kinematics import world_foot_kinematics
+    from foottof.sensors import tof
     from foottof.terrain import TERRAIN_TYPES
 
     key = jax.random.PRNGKey(seed)
@@ -99,9 +172,17 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
     act = nets.policy_fn(params, norm, deterministic=True)
     step = jax.vmap(env.step)
 
+    sites = np.asarray(env.sensing.feet, np.int32)  # the foot of each sensor
+
     def feet(qpos):  # (4, 3) foot centres and (4,) depth below the terrain around, beside a gap
-        foot_pos = world_foot_kinematics(qpos[:19], env.shank_scale).foot_pos
-        return foot_pos, foot_gap_depth(foot_pos, env.hfield.height_at)
+        fk = world_foot_kinematics(qpos[:19], env.shank_scale)
+        out = (fk.foot_pos, foot_gap_depth(fk.foot_pos, env.hfield.height_at))
+        if sight:  # every sensor ray: origins (F, 3), directions (F, R, 3), hits (F, R)
+            pos, dirs, t_hit, _ = tof.cast_rays(
+                env.sensing.spec, env.hfield, fk.tof_pos[sites], fk.tof_rot[sites]
+            )
+            out += (pos, dirs, t_hit)
+        return out
 
     @jax.jit
     def rollout(state):
@@ -118,7 +199,7 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
         return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
 
-    done, succ, fail, stuck, base_z, prog, col, foot_pos, depth = (
+    done, succ, fail, stuck, base_z, prog, col, foot_pos, depth, *rays = (
         np.asarray(x) for x in jax.device_get(rollout(state))
     )
     cause = classify(done, succ, fail, stuck, base_z)
@@ -131,7 +212,47 @@ def run(cfg, checkpoint: str, episodes: int, seed: int):
     xy = foot_pos[t, e, np.maximum(foot, 0), :2]  # (E, 2) the foot that went in
     height_at = lambda p: np.asarray(env.hfield.height_at(jp.asarray(p, jp.float32)))  # noqa: E731
     gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
-    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap
+    rows = None
+    if sight:
+        origins, dirs, t_hit = rays
+        rows = []
+        for i in np.nonzero(is_stuck)[0]:
+            f = foot[i]
+            top = depth[t[i], i, f] + foot_pos[t[i], i, f, 2]  # the stone tops around the foot
+            looked, seen = sightings(
+                xy[i], top, origins[:, i], dirs[:, i], t_hit[:, i], env.sensing.spec.max_range_m
+            )
+            drop, gap_lead, look_lead, swung = sighting_summary(
+                foot_pos[:, i, f, 2], top, t[i], looked, seen
+            )
+            own = np.nonzero(sites == f)[0]  # the stuck foot's own sensor (if it has one)
+            own_lead = sighting_summary(foot_pos[:, i, f, 2], top, t[i], looked, seen[:, own])[1]
+            rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung))
+    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rows
+
+
+def format_sightings(rows, gap) -> str:
+    """One line per gap direction of the foot_stuck episodes: how many had the spot where the
+    foot went in looked at, and seen as a gap, by any sensor and by the foot's own, in the
+    second before it dropped, with the median lead of the first gap sighting [steps of 20 ms],
+    and how many feet stepped in from a swing (and of them, into a gap seen before) or slid off
+    an edge they stood on."""
+    lines = []
+    for d, name in [(None, "all")] + list(enumerate(GAP_DIRECTIONS)):
+        sel = [r for r in rows if d is None or gap[r[0]] == d]
+        if not sel:
+            continue
+        leads = np.array([r[2] for r in sel])
+        seen = leads >= 0
+        med = f", median lead {np.median(leads[seen]):.0f} steps" if seen.any() else ""
+        lines.append(
+            f"sightings, {name} ({len(sel)} foot_stuck): spot looked at "
+            f"{sum(r[3] >= 0 for r in sel)}, seen as a gap {int(seen.sum())}{med}, "
+            f"by the foot's own sensor {sum(r[4] >= 0 for r in sel)}; stepped in from a swing "
+            f"{sum(r[5] for r in sel)} (seen before {sum(r[5] and r[2] >= 0 for r in sel)}), "
+            f"slid off an edge {sum(not r[5] for r in sel)}"
+        )
+    return "\n".join(lines)
 
 
 def format_feet(foot: np.ndarray) -> str:
@@ -185,6 +306,11 @@ def main(argv=None) -> None:
     ap.add_argument("--difficulty_fraction", type=float, default=0.9)
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=5)
+    ap.add_argument(
+        "--sightings",
+        action="store_true",
+        help="also say whether a sensor saw each gap a foot went into before it dropped",
+    )
     args = ap.parse_args(argv)
     if not 0.0 <= args.difficulty_fraction <= 1.0:
         raise SystemExit(f"error: --difficulty_fraction={args.difficulty_fraction} outside [0, 1]")
@@ -196,12 +322,14 @@ def main(argv=None) -> None:
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     try:
-        cause, types, end_step, progress, foot, gap = run(
-            cfg, args.run_dir, args.episodes, args.seed
+        cause, types, end_step, progress, foot, gap, rows = run(
+            cfg, args.run_dir, args.episodes, args.seed, args.sightings
         )
         print(format_table(cause, types, end_step, progress))
         print(format_feet(foot))
         print(format_gaps(gap, types))
+        if rows is not None:
+            print(format_sightings(rows, gap))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:
         raise SystemExit(f"error: {e}") from None
 

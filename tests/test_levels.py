@@ -175,6 +175,9 @@ def test_sighting_summary_counts_steps_before_the_drop():
     # the foot stood (centre 3 cm above the tops: bottom on them), then slid in
     assert sighting_summary(foot_z, 0.0, 12, looked, gap) == (9, 5, 7, False)
     assert sighting_summary(foot_z, 0.0, 12, looked, np.zeros_like(gap)) == (9, -1, 7, False)
+    at_drop = np.zeros_like(gap)
+    at_drop[9, 0] = True  # seen only at the drop step itself: not before it
+    assert sighting_summary(foot_z, 0.0, 12, at_drop, at_drop)[1:3] == (-1, -1)
     lifted = foot_z.copy()
     lifted[5] = 0.09  # bottom 5.85 cm above the tops 4 steps before the drop: a swing
     assert sighting_summary(lifted, 0.0, 12, looked, gap)[3]

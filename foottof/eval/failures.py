@@ -110,7 +110,7 @@ def sightings(spot_xy, top_z, origins, dirs, t_hit, max_range_m: float):
 def sighting_summary(foot_z, top_z, end_step, looked, gap) -> tuple[int, int, int, bool]:
     """For one foot_stuck episode: (step the foot dropped: the last one before the end with its
     centre at or above ``top_z``, steps before it that some sensor first saw a gap at the spot
-    within SIGHT_WINDOW_STEPS (-1: never), the same for the first look at the spot, whether the
+    within SIGHT_WINDOW_STEPS (>= 1; -1: not before the drop), the same for the first look at the spot, whether the
     foot stepped in from a swing: its bottom rose more than SWING_LIFT_M above the stone tops in
     the SWING_LOOKBACK_STEPS before the drop; else it slid off an edge it stood on).
 
@@ -123,7 +123,7 @@ def sighting_summary(foot_z, top_z, end_step, looked, gap) -> tuple[int, int, in
     lo = max(0, drop - SIGHT_WINDOW_STEPS)
 
     def lead(hits):
-        steps = np.nonzero(np.asarray(hits)[lo : drop + 1].any(axis=-1))[0]
+        steps = np.nonzero(np.asarray(hits)[lo:drop].any(axis=-1))[0]  # before the drop step
         return int(drop - (lo + steps[0])) if steps.size else -1
 
     recent = foot_z[max(0, drop - SWING_LOOKBACK_STEPS) : drop + 1]

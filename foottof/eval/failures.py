@@ -97,7 +97,7 @@ def sightings(spot_xy, top_z, origins, dirs, t_hit, max_range_m: float):
     d = np.asarray(dirs, np.float64)
     t = np.asarray(t_hit, np.float64)
     down = d[..., 2] < -1e-6
-    s = np.where(down, (top_z - o[..., 2]) / np.where(down, d[..., 2], -1.0), np.inf)
+    s = np.where(down, (top_z - o[..., 2]) / np.where(down, d[..., 2], -1.0), -1.0)  # -1: never
     cross = o[..., :2] + s[..., None] * d[..., :2]
     near = np.linalg.norm(cross - np.asarray(spot_xy, np.float64), axis=-1) < SIGHT_RADIUS_M
     in_range = (s > 0.0) & (s < max_range_m - SIGHT_BEYOND_M)

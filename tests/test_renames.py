@@ -22,6 +22,12 @@ def _leaf(d: dict, dotted: str):
     return d
 
 
+def _parent(d: dict, dotted: str) -> tuple[dict, str]:
+    """The dict holding a dotted field, and the field's last name."""
+    *path, leaf = dotted.split(".")
+    return _leaf(d, ".".join(path)), leaf
+
+
 def test_every_renamed_field_exists_under_its_new_name_only():
     cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py")).to_dict()
     for old, new in renames.CONFIG_FIELDS.items():
@@ -164,21 +170,14 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     from foottof.envs.anymal_tof import TaskSpec
 
     cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
-    for field in renames.ADDED_FIELDS:  # every added field is a field of the current config
-        _leaf(cfg.to_dict(), field)
     at_default = cfg.to_dict()
     for field, default in renames.ADDED_FIELDS.items():
-        *path, leaf = field.split(".")
-        parent = at_default
-        for k in path:
-            parent = parent[k]
+        _leaf(at_default, field)  # every added field is a field of the current config
+        parent, leaf = _parent(at_default, field)
         parent[leaf] = default
     saved_before = json.loads(json.dumps(at_default))
     for field in renames.ADDED_FIELDS:
-        *path, leaf = field.split(".")
-        parent = saved_before
-        for k in path:
-            parent = parent[k]
+        parent, leaf = _parent(saved_before, field)
         del parent[leaf]
     old = ml_collections.ConfigDict(saved_before)
     new = ml_collections.ConfigDict(at_default)

@@ -110,9 +110,10 @@ def sightings(spot_xy, top_z, origins, dirs, t_hit, max_range_m: float):
 def sighting_summary(foot_z, top_z, end_step, looked, gap) -> tuple[int, int, int, bool]:
     """For one foot_stuck episode: (step the foot dropped: the last one before the end with its
     centre at or above ``top_z``, steps before it that some sensor first saw a gap at the spot
-    within SIGHT_WINDOW_STEPS (>= 1; -1: not before the drop), the same for the first look at the spot, whether the
-    foot stepped in from a swing: its bottom rose more than SWING_LIFT_M above the stone tops in
-    the SWING_LOOKBACK_STEPS before the drop; else it slid off an edge it stood on).
+    within SIGHT_WINDOW_STEPS (>= 1; -1: not before the drop), the same for the first look at
+    the spot, whether the foot stepped in from a swing: its bottom rose more than SWING_LIFT_M
+    above the stone tops in the SWING_LOOKBACK_STEPS before the drop; else it slid off an edge
+    it stood on).
 
     foot_z: (T,) the stuck foot's centre height [m]; looked, gap: (T, F) from :func:`sightings`."""
     from foottof.constants import FOOT_RADIUS_M

@@ -34,6 +34,7 @@ def get_network_section() -> ml_collections.ConfigDict:
     c.lstm_num_layers = 1  # stacked LSTM layers
     c.actor_hidden = (512, 256, 128)  # actor MLP head hidden widths after the LSTM
     c.critic_hidden = (512, 256, 128)  # critic MLP head hidden widths after the LSTM
+    c.obs_skip = False  # True: each head reads [LSTM output, normalized obs] (lstm policy only)
     c.activation = "elu"  # MLP activation: 'elu', 'relu', 'tanh' or 'silu'
     c.init_noise_std = 1.0  # initial action std (state-independent, learned as log std)
     c.max_noise_std = 0.0  # cap on the learned action std; 0 = no cap (rsl_rl has none)

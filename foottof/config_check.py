@@ -284,6 +284,7 @@ RULES = {
     "network.activation": _choice(*ACTIVATIONS),
     "network.init_noise_std": _pos,
     "network.max_noise_std": _nonneg,
+    "network.obs_skip": _bool,
     "network.normalize_observations": _bool,
     "network.normalizer_std_eps": _pos,
     "train.num_iterations": _int(1),

@@ -28,6 +28,7 @@ ADDED_FIELDS = {
     "reward.clearance_target_m": 0.12,  # read only when foot_clearance is on
     "terrain.stretch_prob": 0.0,  # off: every episode on its curriculum level's row
     "terrain.stretch_min_level": 7,  # read only when stretch_prob is on
+    "network.obs_skip": False,  # off: the heads read the LSTM output only
 }
 
 

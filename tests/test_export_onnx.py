@@ -141,3 +141,37 @@ def test_cli_bad_export_path_is_one_line(path, message, tmp_path):
     errors = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
     assert len(errors) == 1 and message in errors[0], p.stderr[-2000:]
     assert "Traceback" not in p.stderr
+
+
+def test_obs_skip_heads_export_equal_jax_and_numpy(flat_policy, tmp_path):
+    """network.obs_skip: the head reads [LSTM output, normalized obs]. The flat policy grown into
+    that model with its observation rows set to random weights (so the skip path carries a large
+    share of each action) exports to NumPy and ONNX that agree with JAX on the recorded episode."""
+    _, params, norm = flat_policy
+    cfg = with_run_network(flat.get_config(), FLAT)
+    cfg.network.obs_skip = True
+    nets = make_networks(12, cfg.network)
+    obs0 = {"state": jp.zeros((1, 181)), "privileged_state": jp.zeros((1, 223))}
+    skip = jax.device_get(nets.init_params(jax.random.PRNGKey(3), obs0))
+    p = jax.device_get(params)
+    skip["params"]["memory_a"] = p["params"]["memory_a"]
+    k = skip["params"]["actor"]["dense_0"]["kernel"]  # (64 + 181, 128), orthogonal init rows
+    assert k.shape == (64 + 181, 128)
+    h = p["params"]["memory_a"]["lstm_0"]["hi"]["kernel"].shape[0]
+    skip["params"]["actor"]["dense_0"]["kernel"] = np.concatenate(
+        [p["params"]["actor"]["dense_0"]["kernel"], k[h:]], axis=0
+    )
+    with np.load(EPISODE) as f:
+        obs, first = f["obs"][:120], f["first"][:120]
+    want = _jax_actions(nets, skip, norm, obs, first)
+    onnx_path = export_onnx.export_onnx(str(tmp_path / "skip.onnx"), nets, skip, norm)
+    np_policy = export.NumpyPolicy(export.export_policy(str(tmp_path / "s.npz"), nets, skip, norm))
+    numpy_actions = []
+    for o, f in zip(obs, first, strict=True):
+        if f:
+            np_policy.reset()
+        numpy_actions.append(np_policy(o))
+    np.testing.assert_allclose(_onnx_actions(onnx_path, obs, first), want, atol=ATOL, rtol=0)
+    np.testing.assert_allclose(np.asarray(numpy_actions), want, atol=ATOL, rtol=0)
+    without = _jax_actions(flat_policy[0], params, norm, obs, first)  # the same LSTM, no skip
+    assert np.abs(want - without).max() > 0.1  # the skip rows move the actions

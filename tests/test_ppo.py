@@ -280,6 +280,61 @@ def test_checkpoint_with_a_renamed_env_metric_restores_without_it(tmp_path, trai
     checkpointer.close()
 
 
+def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
+    tmp_path, trained_once, capsys
+):
+    """A checkpoint of heads that read the LSTM output only resumes into network.obs_skip heads:
+    the new observation rows of both heads' first kernels (and their Adam moments) start at
+    zero, every other leaf comes back as saved, so actions and values are the saved model's."""
+    trainer, state = trained_once
+    saved = jax.device_get(state)
+    checkpointer = ckpt.Checkpointer(str(tmp_path))
+    checkpointer.save(state)
+    cfg = tiny_cfg()
+    cfg.network.obs_skip = True
+    skip_trainer = train_lib.make_train(toy_envs.make_memory_env(privileged=True), cfg)
+    restored, with_rollout = checkpointer.restore(skip_trainer.init(jax.random.PRNGKey(1)))
+    checkpointer.close()
+    restored = jax.device_get(restored)
+    assert with_rollout and int(restored.iteration) == int(saved.iteration)
+    out = capsys.readouterr().out
+    assert "params: inputs grown on 2 leaves" in out  # actor and critic dense_0 kernels
+    assert "opt_state: inputs grown on 4 leaves" in out  # their Adam mu and nu
+    h = cfg.network.lstm_hidden_size
+    for head in ("actor", "critic"):
+        old = saved.params["params"][head]["dense_0"]["kernel"]
+        new = restored.params["params"][head]["dense_0"]["kernel"]
+        assert old.shape[0] == h and new.shape[0] > h
+        np.testing.assert_array_equal(new[:h], old)
+        assert not np.any(new[h:])
+    old_moments, new_moments = jax.tree.leaves(saved.opt_state), jax.tree.leaves(restored.opt_state)
+    assert len(old_moments) == len(new_moments)
+    for old, new in zip(old_moments, new_moments, strict=True):
+        old, new = np.asarray(old), np.asarray(new)
+        if old.shape != new.shape:  # a grown kernel's moments: saved rows, then zeros
+            np.testing.assert_array_equal(new[: old.shape[0]], old)
+            assert not np.any(new[old.shape[0] :])
+        else:
+            np.testing.assert_array_equal(new, old)
+    assert tree_equal(saved.normalizer, restored.normalizer)
+    assert tree_equal(saved.env_state, restored.env_state)
+
+    leaves, treedef = jax.tree.flatten(saved.env_state.obs)
+    keys = jax.random.split(jax.random.PRNGKey(5), len(leaves))
+    obs = jax.tree.unflatten(  # random observations: every obs row of the grown kernels is used
+        treedef, [jax.random.normal(k, x.shape) for k, x in zip(keys, leaves, strict=True)]
+    )
+    resets = jp.zeros(saved.prev_done.shape, bool)
+    _, mean0, _, value0 = trainer.networks.step(
+        saved.params, saved.normalizer, saved.carry, obs, resets
+    )
+    _, mean1, _, value1 = skip_trainer.networks.step(
+        restored.params, restored.normalizer, restored.carry, obs, resets
+    )
+    np.testing.assert_allclose(mean1, mean0, atol=1e-6)
+    np.testing.assert_allclose(value1, value0, atol=1e-6)
+
+
 def test_resume_equals_straight_run(tmp_path, capsys):
     env = MEMORY_ENV
     straight = runner.run(tiny_cfg(num_iterations=4), env, str(tmp_path / "a"))
@@ -431,8 +486,8 @@ def test_init_from(tmp_path):
     bigger.network.lstm_hidden_size = 16
     with pytest.raises(
         ValueError,
-        match=r"leaf \['params'\]\['params'\]\['actor'\]\['dense_0'\]\['kernel'\] "
-        r"has shape \(8, 8\) in the checkpoint but \(16, 8\)",
+        match=r"leaf \['params'\]\['params'\]\['memory_a'\]\['lstm_0'\]\['hf'\]\['bias'\] "
+        r"has shape \(8,\) in the checkpoint but \(16,\)",
     ):
         runner.run(bigger, env, str(tmp_path / "stage2b"), init_from=str(tmp_path / "stage1"))
     with pytest.raises(FileNotFoundError, match="init_from"):

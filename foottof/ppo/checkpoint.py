@@ -361,10 +361,14 @@ class Checkpointer:
         except Exception as e:  # orbax/JSON errors of a damaged manifest
             raise CheckpointUnreadable(f"{path}: manifest unreadable ({_one_line(e)})") from None
         items = [i for i in ITEMS if i in manifest]
+        grown, saved_like = {}, {}
         for item in items:
-            check_compatible(item, manifest[item], _sub(target, item), f"checkpoint {step}")
+            sub = _sub(target, item)
+            grown[item] = _grown_leaves(manifest[item], sub) if item in _GROWABLE_ITEMS else {}
+            saved_like[item] = _shaped_as_saved(sub, grown[item])
+            check_compatible(item, manifest[item], saved_like[item], f"checkpoint {step}")
         args = {
-            i: ocp.args.StandardRestore(_abstract(_sub(target, i), manifest[i], with_extra=True))
+            i: ocp.args.StandardRestore(_abstract(saved_like[i], manifest[i], with_extra=True))
             for i in items
         }
         try:
@@ -374,28 +378,72 @@ class Checkpointer:
             raise CheckpointUnreadable(f"{path}: data unreadable ({_one_line(e)})") from None
         fields = {}
         for item in items:
-            fields.update(_unflatten(_sub(target, item), restored[item], manifest[item]))
+            tree = _unflatten(saved_like[item], restored[item], manifest[item])
+            if grown[item]:
+                tree = _grow_tree(tree, _sub(target, item), grown[item])
+                print(
+                    f"[checkpoint] {item}: inputs grown on {len(grown[item])} leaves "
+                    f"(new inputs start with zero weight)"
+                )
+            fields.update(tree)
         return target.replace(**fields), "rollout" in items
 
     def close(self) -> None:
         self._manager.close()
 
 
-# Leaves that read the critic's observation: when a run adds critic inputs at the end (e.g.
-# env.critic_height_scan), init_from a run without them grows these along their first axis.
-_CRITIC_INPUT_LEAVES = (
+# Leaves whose first axis is a network's input: when a run adds inputs at the end (critic
+# inputs such as env.critic_height_scan; network.obs_skip's observation beside the LSTM output),
+# init_from or a resume from a run without them grows these along their first axis (the names
+# match inside params, the optimizer's moments and the normalizer alike).
+_INPUT_LEAVES = (
     "['memory_c']['lstm_0']['ii']['kernel']",
     "['memory_c']['lstm_0']['if']['kernel']",
     "['memory_c']['lstm_0']['ig']['kernel']",
     "['memory_c']['lstm_0']['io']['kernel']",
-    "['critic']['dense_0']['kernel']",  # network.policy = mlp: the critic MLP reads the obs
+    "['critic']['dense_0']['kernel']",  # the critic head's first layer (mlp policy, obs_skip)
+    "['actor']['dense_0']['kernel']",  # the actor head's first layer (mlp policy, obs_skip)
     "['privileged_state']",  # normalizer mean / std / summed_variance
 )
+_GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, not 'rollout'
+
+
+def _shaped_as_saved(target: Any, grown: dict[str, tuple]) -> Any:
+    """`target` with the leaves in `grown` ({name: saved shape}) as abstract arrays of the
+    saved shape (what the checkpoint holds)."""
+    return jax.tree_util.tree_map_with_path(
+        lambda p, x: (
+            jax.ShapeDtypeStruct(grown[jax.tree_util.keystr(p)], x.dtype)
+            if jax.tree_util.keystr(p) in grown
+            else x
+        ),
+        target,
+    )
+
+
+def _grow_tree(tree: Any, target: Any, grown: dict[str, tuple]) -> Any:
+    """The restored `tree` with its `grown` leaves embedded in `target`'s shapes (_grow; a
+    normalizer's new entries get the variance-1 summed variance of its sample count)."""
+    count = 0.0
+    if "normalizer" in tree:
+        c = tree["normalizer"].count
+        count = float(np.asarray(getattr(c, "hi", 0))) * 2.0**32 + float(
+            np.asarray(getattr(c, "lo", c))
+        )
+    return jax.tree_util.tree_map_with_path(
+        lambda p, x, t: (
+            jax.numpy.asarray(_grow(jax.tree_util.keystr(p), x, np.shape(t), count))
+            if jax.tree_util.keystr(p) in grown
+            else x
+        ),
+        tree,
+        target,
+    )
 
 
 def _grown_leaves(saved_manifest: list, target: Any) -> dict[str, tuple]:
-    """{leaf name: saved shape} of critic-input leaves the checkpoint holds with fewer inputs
-    (a shorter first axis, the rest equal) than `target`."""
+    """{leaf name: saved shape} of input leaves (_INPUT_LEAVES) the checkpoint holds with fewer
+    inputs (a shorter first axis, the rest equal) than `target`."""
     saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
     out = {}
     for path, x in jax.tree_util.tree_flatten_with_path(target)[0]:
@@ -403,7 +451,7 @@ def _grown_leaves(saved_manifest: list, target: Any) -> dict[str, tuple]:
         old, new = saved.get(name), tuple(np.shape(x))
         if (
             old is not None
-            and any(k in name for k in _CRITIC_INPUT_LEAVES)
+            and any(k in name for k in _INPUT_LEAVES)
             and len(old) == len(new) >= 1
             and old[0] < new[0]
             and old[1:] == new[1:]
@@ -475,14 +523,7 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
             if item not in manifest:
                 raise CheckpointUnreadable(f"{step_dir}: the checkpoint has no {item!r} item")
             grown[item] = _grown_leaves(manifest[item], sub)
-            saved_like[item] = jax.tree_util.tree_map_with_path(
-                lambda p, x, g=grown[item]: (
-                    jax.ShapeDtypeStruct(g[jax.tree_util.keystr(p)], x.dtype)
-                    if jax.tree_util.keystr(p) in g
-                    else x
-                ),
-                sub,
-            )
+            saved_like[item] = _shaped_as_saved(sub, grown[item])
             check_compatible(
                 item, manifest[item], saved_like[item], f"init_from {directory}/{step}"
             )
@@ -498,23 +539,9 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
     for item, sub in target.items():
         tree = _unflatten(saved_like[item], restored[item])
         if grown[item]:
-            count = 0.0
-            if item == "normalizer":
-                c = tree["normalizer"].count
-                count = float(np.asarray(getattr(c, "hi", 0))) * 2.0**32 + float(
-                    np.asarray(getattr(c, "lo", c))
-                )
-            tree = jax.tree_util.tree_map_with_path(
-                lambda p, x, t, g=grown[item], n=count: (
-                    jax.numpy.asarray(_grow(jax.tree_util.keystr(p), x, np.shape(t), n))
-                    if jax.tree_util.keystr(p) in g
-                    else x
-                ),
-                tree,
-                sub,
-            )
+            tree = _grow_tree(tree, sub, grown[item])
             print(
-                f"[init_from] {item}: critic inputs grown on {len(grown[item])} leaves "
+                f"[init_from] {item}: inputs grown on {len(grown[item])} leaves "
                 f"(new inputs start with zero weight)"
             )
         out.append(tree[item])

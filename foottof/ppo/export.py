@@ -31,7 +31,8 @@ def export_policy(path: str, networks, params, normalizer) -> str:
 
 def actor_arrays(networks, params, normalizer) -> tuple[dict, dict]:
     """(arrays, meta) of the actor: normalizer mean/std, LSTM weights per layer (gates i, f, g,
-    o concatenated: w_x (in, 4H), w_h (H, 4H), b (4H,)), MLP head; float32 NumPy."""
+    o concatenated: w_x (in, 4H), w_h (H, 4H), b (4H,)), MLP head (with meta["obs_skip"] its
+    first layer reads [LSTM output, normalized obs]); float32 NumPy."""
     import jax
 
     module = networks.module
@@ -65,6 +66,7 @@ def actor_arrays(networks, params, normalizer) -> tuple[dict, dict]:
         "lstm_num_layers": int(module.lstm_num_layers) if module.recurrent else 0,
         "lstm_hidden_size": int(module.lstm_hidden_size),
         "actor_layers": names,
+        "obs_skip": bool(getattr(module, "obs_skip", False)),
         "activation": module.activation,
         "normalize_observations": bool(networks.normalize_observations),
         "action_size": int(module.action_size),
@@ -111,6 +113,7 @@ class NumpyPolicy:
             raise ValueError(f"obs shape {x.shape}; expected ({self.obs_size},)")
         if self.meta["normalize_observations"]:
             x = (x - a["obs_mean"]) / a["obs_std"]
+        obs_in = x
         for layer, (c, h) in enumerate(self.carry):
             z = x @ a[f"lstm_{layer}/w_x"] + h @ a[f"lstm_{layer}/w_h"] + a[f"lstm_{layer}/b"]
             i, f, g, o = np.split(z, 4)
@@ -118,6 +121,8 @@ class NumpyPolicy:
             h = _sigmoid(o) * np.tanh(c)
             self.carry[layer] = (c, h)
             x = h
+        if self.meta.get("obs_skip", False):
+            x = np.concatenate([x, obs_in])
         for name in self.meta["actor_layers"]:
             x = x @ a[f"actor/{name}/kernel"] + a[f"actor/{name}/bias"]
             if name != "out":

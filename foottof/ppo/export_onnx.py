@@ -51,6 +51,7 @@ def build_model(arrays: dict, meta: dict, metadata: dict | None = None):
     if meta["normalize_observations"]:
         x = node("Sub", [x, const("obs_mean", arrays["obs_mean"])], "obs_centred")[0]
         x = node("Div", [x, const("obs_std", arrays["obs_std"])], "obs_normalized")[0]
+    obs_in = x
     h_outs, c_outs = [], []
     for layer in range(max(layers, 0)):
         p = f"lstm_{layer}"
@@ -81,6 +82,8 @@ def build_model(arrays: dict, meta: dict, metadata: dict | None = None):
     else:  # an MLP policy: the state passes through untouched
         node("Identity", ["h_in"], "h_out")
         node("Identity", ["c_in"], "c_out")
+    if meta.get("obs_skip", False):  # the head reads [LSTM output, normalized obs]
+        x = node("Concat", [x, obs_in], "actor/skip", axis=1)[0]
     for name in meta["actor_layers"]:
         k = const(f"actor/{name}/kernel", arrays[f"actor/{name}/kernel"])
         b = const(f"actor/{name}/bias", arrays[f"actor/{name}/bias"])

@@ -12,6 +12,7 @@ import ml_collections
 from brax.training.acme import running_statistics
 
 from foottof import config_check, limits
+from foottof.renames import added_default
 
 Carry = (
     Any  # {'actor': ((c, h), ...), 'critic': ((c, h), ...)} per LSTM layer, each (B, H); () for MLP
@@ -66,7 +67,11 @@ class ActorCritic(nn.Module):
     """Separate memories for actor and critic, MLP heads, state-independent log std.
 
     One call is one control step: (carry, actor_obs (B, oa), critic_obs (B, oc)) ->
-    (carry, action mean (B, A), log_std (A,), value (B,)).
+    (carry, action mean (B, A), log_std (A,), value (B,)). With `obs_skip` (recurrent only) each
+    head reads its (normalized) observation beside its LSTM's output, [h, obs], so the current
+    readings reach the head without passing the LSTM; the observation rows of the heads' first
+    kernels are the last ones (a checkpoint without them grows into this model with those rows
+    zero: foottof.ppo.checkpoint).
     """
 
     action_size: int
@@ -78,6 +83,7 @@ class ActorCritic(nn.Module):
     activation: str
     init_noise_std: float
     max_noise_std: float = 0.0  # cap on the action std (0: none); see Networks.action_log_std
+    obs_skip: bool = False  # heads read [LSTM output, obs] (network.obs_skip)
 
     @nn.compact
     def __call__(self, carry: Carry, actor_obs: jax.Array, critic_obs: jax.Array):
@@ -90,6 +96,9 @@ class ActorCritic(nn.Module):
                 carry["critic"], xc
             )
             carry = {"actor": carry_a, "critic": carry_c}
+            if self.obs_skip:
+                xa = jp.concatenate([xa, actor_obs], axis=-1)
+                xc = jp.concatenate([xc, critic_obs], axis=-1)
         mean = MLP(self.actor_hidden, self.action_size, self.activation, 0.01, name="actor")(xa)
         value = MLP(self.critic_hidden, 1, self.activation, 1.0, name="critic")(xc)[..., 0]
         log_std = self.param(
@@ -246,6 +255,12 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
     n = network_cfg
     config_check.check_sections({"network": n}, ("network",))  # the rules, held there once
     max_std = float(n.get("max_noise_std", 0.0))
+    obs_skip = bool(n.get("obs_skip", added_default("network.obs_skip")))
+    if obs_skip and n.policy != "lstm":
+        raise ValueError(
+            f"network.obs_skip=True needs network.policy='lstm' (got {n.policy!r}: an MLP "
+            f"policy's heads read the observation already)"
+        )
     module = ActorCritic(
         action_size=int(action_size),
         recurrent=n.policy == "lstm",
@@ -256,5 +271,6 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
         activation=str(n.activation),
         init_noise_std=float(n.init_noise_std),
         max_noise_std=max_std,
+        obs_skip=obs_skip,
     )
     return Networks(module, bool(n.normalize_observations), float(n.normalizer_std_eps))

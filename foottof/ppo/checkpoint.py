@@ -306,6 +306,10 @@ class Checkpointer:
         Without `step`, each newer checkpoint that is unreadable is skipped with a one-line
         warning naming it and the cause.
 
+        A model whose network reads more inputs than the saved one (_INPUT_LEAVES, e.g.
+        network.obs_skip heads) gets the saved kernels with zero rows for the new inputs, and
+        zero Adam moments for them: it acts as the saved one did.
+
         Returns:
           (state, restored_rollout): fields of items missing in the checkpoint ('rollout' when
           saved with save_env_state=False) keep `target`'s values.

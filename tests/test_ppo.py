@@ -513,6 +513,15 @@ def test_bad_config_values():
         locked.ppo.lerning_rate = 1e-3
 
 
+def test_obs_skip_needs_an_lstm_policy():
+    cfg = _ppo.get_network_section()
+    cfg.policy, cfg.obs_skip = "mlp", True
+    with pytest.raises(ValueError, match=r"network.obs_skip=True needs network.policy='lstm'"):
+        net.make_networks(12, cfg)
+    cfg.policy = "lstm"
+    assert net.make_networks(12, cfg).module.obs_skip
+
+
 def test_env_state_without_env_axis_is_rejected():
     class Unbatched(train_lib.VmapEnv):
         def reset(self, keys):

@@ -66,7 +66,7 @@ def actor_arrays(networks, params, normalizer) -> tuple[dict, dict]:
         "lstm_num_layers": int(module.lstm_num_layers) if module.recurrent else 0,
         "lstm_hidden_size": int(module.lstm_hidden_size),
         "actor_layers": names,
-        "obs_skip": bool(getattr(module, "obs_skip", False)),
+        "obs_skip": bool(module.obs_skip),
         "activation": module.activation,
         "normalize_observations": bool(networks.normalize_observations),
         "action_size": int(module.action_size),

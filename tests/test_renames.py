@@ -161,7 +161,7 @@ def test_draw_fingerprint_is_kept_across_the_rename():
 
 def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     """A run config saved before the ADDED_FIELDS existed (the fields deleted) builds the same
-    TaskSpec and reward terms as one holding them at their old-behaviour defaults: the env's
+    TaskSpec, reward terms and network as one holding them at their old-behaviour defaults: the
     fallbacks are renames.added_default, written once."""
     import jax.numpy as jp
     import ml_collections
@@ -202,5 +202,10 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
         assert jp.allclose(value, terms(new)[name]), name
     new.reward.clearance_target_m = 0.2  # away from the default: the term differs
     assert not jp.allclose(terms(old)["foot_clearance"], terms(new)["foot_clearance"])
+    from foottof.ppo.networks import make_networks
+
+    assert make_networks(12, old.network).module == make_networks(12, new.network).module
+    new.network.obs_skip = True  # away from the default: the networks differ
+    assert make_networks(12, old.network).module != make_networks(12, new.network).module
     with pytest.raises(KeyError, match="not an added field"):
         renames.added_default("terrain.num_levels")

@@ -532,3 +532,49 @@ def test_foot_edges_on_a_hand_built_step():
     # a spread of 0.1 m is no edge when edges need more than 0.15 m
     high = rw.foot_edges(feet, hf.height_at, r_foot, margin, 0.04, 0.15)
     np.testing.assert_array_equal(np.asarray(high), np.zeros(4))
+
+
+def _lowest_foot_bottoms(env, qpos: np.ndarray) -> np.ndarray:
+    """Oracle: per reset, the lowest foot sphere's bottom above the terrain under it [m], from
+    MuJoCo C (foot centres by mj_kinematics, terrain by mj_rayHfield straight down)."""
+    import mujoco
+
+    m, d = env.mj_model, mujoco.MjData(env.mj_model)
+    feet = [m.geom(n).id for n in constants.FOOT_GEOMS]
+    terrain = m.geom("terrain").id
+    top = float(env.hfield.z_floor_m + env.hfield.z_range_m + 1.0)
+    out = []
+    for q in qpos:
+        d.qpos[:] = q
+        mujoco.mj_kinematics(m, d)
+        bottoms = []
+        for g in feet:
+            x, y, z = d.geom_xpos[g]
+            dist = mujoco.mj_rayHfield(m, d, terrain, np.array([x, y, top]), np.array([0, 0, -1.0]))
+            bottoms.append(z - m.geom_size[g, 0] - (top - dist))
+        out.append(min(bottoms))
+    return np.asarray(out)
+
+
+def test_wide_initial_poses_start_no_foot_inside_the_terrain():
+    """Stage 2's initial poses (roll/pitch U(+-0.2) rad, joints U(+-0.15) rad) put a foot up to
+    ~0.13 m into the terrain at the nominal spawn height; the reset lifts the robot until the
+    lowest foot sphere rests on the terrain. Poses whose feet are all above it keep the nominal
+    height (stage 1's spawns), so the lift never raises a robot higher than it needs."""
+    cfg = _cfg()
+    cfg.env.init_roll_pitch_rad = 0.2
+    cfg.env.init_joint_noise_rad = 0.15
+    env = make_env(cfg)
+    n = 48
+    state = jax.jit(jax.vmap(env.reset))(jax.random.split(jax.random.PRNGKey(11), n))
+    qpos = np.asarray(state.pipeline_state.qpos, np.float64)
+    bottoms = _lowest_foot_bottoms(env, qpos)
+    assert bottoms.min() > -2e-3, bottoms.min()  # no foot starts inside the terrain
+    # lifted resets rest a foot on the terrain; the others keep the nominal height above it
+    task = state.info["task"]
+    nominal = np.asarray(task.spawn[:, 3]) + env._stand_height + env.spec.spawn_height_offset_m
+    lifted = qpos[:, 2] > nominal + 1e-5
+    assert 0 < lifted.sum() < n  # both kinds occur at these pose spreads
+    np.testing.assert_allclose(bottoms[lifted], 0.0, atol=2e-3)
+    np.testing.assert_allclose(qpos[~lifted, 2], nominal[~lifted], atol=1e-5)
+    assert (bottoms[~lifted] > -2e-3).all()

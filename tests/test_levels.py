@@ -187,3 +187,25 @@ def test_sighting_summary_counts_steps_before_the_drop():
     early = np.zeros((len(long_z), 1), bool)
     early[0] = True  # seen 60 steps before the drop: outside the window
     assert sighting_summary(long_z, 0.0, len(long_z) - 1, early, early) == (60, -1, -1, False)
+
+
+def test_failures_on_the_training_map_cover_every_column_type():
+    """foottof.eval.failures.run with training_level: the stage-2 training map of the config
+    (not the evaluation ensemble), env i on column i; the column types come from
+    allocate_columns of the stage's weights. A level outside the map is refused, naming the
+    range."""
+    from configs import smoke
+    from foottof.eval.failures import CAUSES, run
+
+    cfg = smoke.get_config()
+    cfg.stage = 2
+    cfg.terrain.num_cols = 9
+    cfg.env.episode_length_s = 0.4  # 20 steps: the causes, not the walk, are under test
+    cause, types, end_step, progress, foot, gap, rows = run(cfg, None, 9, 3, training_level=1)
+    expected = [TERRAIN_TYPES[t] for t in allocate_columns(cfg.terrain.stage2_weights, 9)]
+    assert types == expected
+    assert {"beam", "stairs", "pyramid_up", "pyramid_down"} <= set(types)
+    assert cause.shape == end_step.shape == progress.shape == (9,) and rows is None
+    assert set(cause.tolist()) <= set(range(len(CAUSES)))
+    with pytest.raises(ValueError, match=r"training level 2 outside the map's levels \[0, 1\]"):
+        run(cfg, None, 9, 3, training_level=2)

@@ -19,6 +19,11 @@ terrain around that foot before the last step (:func:`gap_direction`; the course
 columns of stones), ``junction`` (open both ways: where gaps cross, or a wide pit) and
 ``hole`` (stone all around).
 
+With ``--training_level L`` it runs on the training map of ``--config`` instead, every env at
+curriculum level L, one column after another (so every terrain type of the stage is covered),
+with that config's randomization and sensor degradation: where the training curriculum stalls,
+and why (e.g. ``--config configs/stage2_cpu.py --training_level 0`` for the stage-2 start).
+
 With ``--sightings`` it also asks whether the robot could have known: for each ``foot_stuck``
 episode, did any foot sensor's ray look at the spot where the foot went in during the second
 before it dropped below the stone tops, and did that ray see a gap there (:func:`sightings`)?
@@ -151,9 +156,38 @@ def classify(done, success, failed, stuck, base_z) -> np.ndarray:
     )
 
 
-def run(cfg, checkpoint: str, episodes: int, seed: int, sight: bool = False):
-    """(cause per env, terrain type name per env, end step, progress at the end, the foot that
-    went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
+def training_env_and_policy(cfg, checkpoint: str | None, key, level: int):
+    """The training env of ``cfg`` (its map, randomization and degradation) and the policy.
+
+    Raises:
+      ValueError: ``level`` outside the map's levels [0, terrain.num_levels - 1].
+    """
+    import jax.numpy as jp
+
+    from foottof.envs import make_env
+    from foottof.eval.harness import load_policy
+
+    top = int(cfg.terrain.num_levels) - 1
+    if not 0 <= level <= top:
+        raise ValueError(f"training level {level} outside the map's levels [0, {top}]")
+    env = make_env(cfg, source="tof")
+    obs = {k: jp.zeros((1, n), jp.float32) for k, n in env.observation_size.items()}
+    return (env, *load_policy(cfg, env, obs, checkpoint, key))
+
+
+def run(
+    cfg,
+    checkpoint: str | None,
+    episodes: int,
+    seed: int,
+    sight: bool = False,
+    training_level: int | None = None,
+):
+    """With ``training_level`` None, on the evaluation ensemble (``cfg.eval``); else on the
+    training map of ``cfg`` (its stage, randomization and sensor degradation as in training), env
+    i on column i mod the map's columns at that curriculum level. ``checkpoint`` None: a fresh
+    init. Returns (cause per env, terrain type name per env, end step, progress at the end, the
+    foot that went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
     direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck) and, with
     ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
     swing) row per foot_stuck episode (:func:`sighting_summary`; the own-sensor lead from the
@@ -168,8 +202,15 @@ def run(cfg, checkpoint: str, episodes: int, seed: int, sight: bool = False):
     from foottof.terrain import TERRAIN_TYPES
 
     key = jax.random.PRNGKey(seed)
-    env, nets, params, norm = make_eval_env_and_policy(cfg, "tof", checkpoint, key, key)
-    state = jax.jit(jax.vmap(env.reset))(jax.random.split(key, episodes))
+    if training_level is None:
+        env, nets, params, norm = make_eval_env_and_policy(cfg, "tof", checkpoint, key, key)
+        state = jax.jit(jax.vmap(env.reset))(jax.random.split(key, episodes))
+    else:
+        env, nets, params, norm = training_env_and_policy(cfg, checkpoint, key, training_level)
+        cols = jp.arange(episodes, dtype=jp.int32) % env.tmap.num_cols
+        levels = jp.full((episodes,), training_level, jp.int32)
+        reset = jax.jit(jax.vmap(env._reset_episode))  # explicit tiles (level, column)
+        state = reset(jax.random.split(key, episodes), levels, cols)
     act = nets.policy_fn(params, norm, deterministic=True)
     step = jax.vmap(env.step)
 
@@ -308,6 +349,13 @@ def main(argv=None) -> None:
     ap.add_argument("--episodes", type=int, default=100)
     ap.add_argument("--seed", type=int, default=5)
     ap.add_argument(
+        "--training_level",
+        type=int,
+        default=None,
+        help="run on the training map of --config at this curriculum level instead (its stage, "
+        "randomization and sensor degradation; env i on column i mod the map's columns)",
+    )
+    ap.add_argument(
         "--sightings",
         action="store_true",
         help="also say whether a sensor saw each gap a foot went into before it dropped",
@@ -324,7 +372,7 @@ def main(argv=None) -> None:
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     try:
         cause, types, end_step, progress, foot, gap, rows = run(
-            cfg, args.run_dir, args.episodes, args.seed, args.sightings
+            cfg, args.run_dir, args.episodes, args.seed, args.sightings, args.training_level
         )
         print(format_table(cause, types, end_step, progress))
         print(format_feet(foot))

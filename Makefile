@@ -13,12 +13,15 @@ $(STAMP): pyproject.toml
 	touch $(STAMP)
 
 # Main job on a CPU-sized default: a short training run (configs/cpu.py, ~2 min), then one episode
-# of a shipped policy with plots and a video: policies/latest if present, else policies/flat.
+# of a shipped policy with plots and a video: policies/latest if present (on the evaluation
+# ensemble at DEMO_DIFFICULTY of the stage-1 range), else policies/flat.
 DEMO_OUT := runs/demo_analysis
+DEMO_DIFFICULTY ?= 0.125
 demo: $(STAMP) render-deps
 	$(PY) train.py --config configs/cpu.py
 	@if [ -d policies/latest/checkpoints ]; then \
-	  $(PY) evaluate.py --analyze --source tof --checkpoint policies/latest --out $(DEMO_OUT); \
+	  $(PY) evaluate.py --analyze --source tof --checkpoint policies/latest \
+	    --config.eval.difficulty_fraction=$(DEMO_DIFFICULTY) --out $(DEMO_OUT); \
 	else \
 	  $(PY) evaluate.py --analyze --source tof --checkpoint policies/flat --config configs/flat.py --out $(DEMO_OUT); \
 	fi

@@ -629,7 +629,7 @@ class AnymalToFEnv(Env):
         z = spawn[3] + self._stand_height + self.spec.spawn_height_offset_m
         qpos = jp.concatenate([jp.array([spawn[0], spawn[1]]), z[None], quat, q0])
         # A tilted base or bent joints can put a foot below the terrain at the nominal height
-        # (stage 2's 0.2 rad and 0.15 rad: up to ~10 cm): lift the robot until no foot sphere
+        # (stage 2's 0.2 rad and 0.15 rad: up to ~0.13 m): lift the robot until no foot sphere
         # starts inside the terrain under it (a no-op for poses whose feet are all above it).
         fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
         bottom = fk.foot_pos[:, 2] - self.foot_radius_m - self.hfield.height_at(fk.foot_pos[:, :2])

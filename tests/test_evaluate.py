@@ -161,6 +161,56 @@ def test_paired_cli_bad_input_and_output(tmp_path, capsys):
     assert tuple(row) == paired.PAIRED_KEYS and (row["a_only"], row["b_only"]) == ("1", "0")
 
 
+def _sweep_doc(source, perturbation, levels_success):
+    """An episodes document of one sweep: {level: success list}, falls where no success."""
+    doc = _episodes_doc([0], [0])
+    doc["cells"] = []
+    for level, success in levels_success.items():
+        cell = _episodes_doc(success, [1 - x for x in success])["cells"][0]
+        cell |= {"source": source, "perturbation": perturbation, "level": level}
+        doc["cells"].append(cell)
+    doc["draws"]["num_envs"] = doc["draws"]["episodes"] = len(success)
+    return doc
+
+
+def test_figure_pairs_tof_with_each_panels_mock_hand_checked(tmp_path, capsys):
+    sweeps = {  # 12 episodes per cell
+        ("tof", "joint_offset"): {0.0: [1] * 6 + [0] * 6, 0.1: [1] * 8 + [0] * 4},
+        ("mock_ideal", "joint_offset"): {0.0: [1] * 7 + [0] * 5, 0.1: [0] * 12},
+        ("tof", "odometry"): {0.0: [1] * 2 + [0] * 10, 4.0: [0] * 12},
+        ("mock_aggre", "odometry"): {4.0: [0] * 10 + [1] * 2, 9.0: [1] * 12},
+        ("mock_aggre", "joint_offset"): {0.0: [1] * 12},  # not a panel of the figure: unused
+    }
+    for (source, pert), by_level in sweeps.items():
+        doc = _sweep_doc(source, pert, by_level)
+        (tmp_path / f"episodes_{source}_{pert}.json").write_text(json.dumps(doc))
+    rows = paired.pair_figure(str(tmp_path))
+    got = [(r["source"], r["perturbation"], r["level"], r["a_only"], r["b_only"]) for r in rows]
+    assert got == [  # shank length has no sweep; odometry pairs only the level both hold
+        ("tof|mock_ideal", "joint_offset", 0.0, 0, 1),
+        ("tof|mock_ideal", "joint_offset", 0.1, 8, 0),
+        ("tof|mock_aggre", "odometry", 4.0, 0, 2),
+    ]
+    assert rows[1]["p_value"] == pytest.approx(2 / 2**8)  # 8 discordant, all one way
+    assert (rows[1]["successes_a"], rows[1]["falls_b"], rows[1]["episodes"]) == (8, 12, 12)
+    out = tmp_path / "figure_paired.csv"
+    paired.main(["--figure", str(tmp_path), "--out", str(out)])
+    assert "tof|mock_aggre" in capsys.readouterr().out
+    assert [r["source"] for r in csv.DictReader(out.open())] == [r["source"] for r in rows]
+    with pytest.raises(SystemExit, match="or --figure OUT_DIR alone"):
+        paired.main(["--figure", str(tmp_path), f"a={tmp_path}", f"b={tmp_path}"])
+    with pytest.raises(SystemExit, match="or --figure OUT_DIR alone"):
+        paired.main([f"a={tmp_path}"])
+    (tmp_path / "only_tof").mkdir()
+    with pytest.raises(SystemExit, match="episodes_mock_ideal_joint_offset.json"):
+        paired.main(["--figure", str(tmp_path / "only_tof")])
+    other = _sweep_doc("mock_ideal", "joint_offset", {0.0: [1] * 12})
+    other["draws"]["seed"] = 3
+    (tmp_path / "episodes_mock_ideal_joint_offset.json").write_text(json.dumps(other))
+    with pytest.raises(ValueError, match="seed differs"):
+        paired.pair_figure(str(tmp_path))
+
+
 def test_check_inputs():
     assert check_source("all") == ("tof", "mock_ideal", "mock_aggre")
     with pytest.raises(ValueError, match=r"unknown source 'lidar'.*mock_aggre"):

@@ -9,6 +9,11 @@ only) and the exact two-sided McNemar p-value (a binomial test of the discordant
 episode count and config fingerprint (``results.draws_fingerprint``); anything else is an error
 that names what differs.
 
+``python -m foottof.eval.paired --figure OUT_DIR [--out FILE.csv]`` pairs sources instead, within
+one robustness-figure folder (every source there ran the same draws): per panel, ``tof`` against
+the panel's mock (FIGURE_PANELS: ``mock_ideal`` for joint offset and shank length, ``mock_aggre``
+for odometry), level by level, as the paper compares them.
+
 Why paired: with 200 episodes per cell a Wilson interval is about +-0.07 wide, so two
 independent rates must differ by ~0.1 to tell apart. On the same draws most episodes end the
 same way for both policies, and only the discordant ones carry the difference.
@@ -86,6 +91,31 @@ def check_same_draws(doc_a: dict, doc_b: dict, names=("a", "b")) -> None:
             )
 
 
+def _pair_row(ca: dict, cb: dict, source: str) -> dict:
+    """One PAIRED_KEYS row from two cells of the same episodes."""
+    sa, sb = ca["success"], cb["success"]
+    if len(sa) != len(sb):
+        raise ValueError(
+            f"cell {ca['source']}/{ca['perturbation']}/{ca['level']} vs "
+            f"{cb['source']}/{cb['perturbation']}/{cb['level']}: {len(sa)} vs {len(sb)} episodes"
+        )
+    a_only = sum(1 for x, y in zip(sa, sb, strict=True) if x and not y)
+    b_only = sum(1 for x, y in zip(sa, sb, strict=True) if y and not x)
+    return {
+        "source": source,
+        "perturbation": ca["perturbation"],
+        "level": ca["level"],
+        "episodes": len(sa),
+        "successes_a": sum(sa),
+        "successes_b": sum(sb),
+        "a_only": a_only,
+        "b_only": b_only,
+        "p_value": mcnemar_exact(a_only, b_only),
+        "falls_a": sum(ca["failed"]),
+        "falls_b": sum(cb["failed"]),
+    }
+
+
 def pair_cells(doc_a: dict, doc_b: dict, names=("a", "b")) -> list[dict]:
     """One row (PAIRED_KEYS) per cell present in both documents, in doc_a's order."""
     check_same_draws(doc_a, doc_b, names)
@@ -93,30 +123,51 @@ def pair_cells(doc_a: dict, doc_b: dict, names=("a", "b")) -> list[dict]:
     rows = []
     for ca in doc_a["cells"]:
         cb = cells_b.get((ca["source"], ca["perturbation"], ca["level"]))
-        if cb is None:
+        if cb is not None:
+            rows.append(_pair_row(ca, cb, ca["source"]))
+    return rows
+
+
+# The robustness figure's panels: the perturbation and the mock that `tof` is compared with.
+FIGURE_PANELS = {
+    "joint_offset": "mock_ideal",
+    "shank_length": "mock_ideal",
+    "odometry": "mock_aggre",
+}
+
+
+def pair_sources(doc_tof: dict, doc_mock: dict) -> list[dict]:
+    """``tof`` (a) against a mock (b) on the same episodes, one row per level both hold, in
+    doc_tof's order; the row's source reads ``tof|<mock>``."""
+    check_same_draws(doc_tof, doc_mock, ("tof", "mock"))
+    cells_m = {(c["perturbation"], c["level"]): c for c in doc_mock["cells"]}
+    rows = []
+    for ct in doc_tof["cells"]:
+        cm = cells_m.get((ct["perturbation"], ct["level"]))
+        if cm is not None:
+            rows.append(_pair_row(ct, cm, f"{ct['source']}|{cm['source']}"))
+    return rows
+
+
+def pair_figure(out_dir: str) -> list[dict]:
+    """pair_sources for each FIGURE_PANELS panel whose two sweeps the folder holds.
+
+    Raises:
+      FileNotFoundError: no such folder, or not one panel with both sweeps in it.
+    """
+    if not os.path.isdir(out_dir):
+        raise FileNotFoundError(f"{out_dir}: no such evaluation folder")
+    rows, missing = [], []
+    for pert, mock in FIGURE_PANELS.items():
+        paths = [os.path.join(out_dir, f"episodes_{s}_{pert}.json") for s in ("tof", mock)]
+        if not all(os.path.exists(p) for p in paths):
+            missing.append(" + ".join(os.path.basename(p) for p in paths))
             continue
-        sa, sb = ca["success"], cb["success"]
-        if len(sa) != len(sb):
-            raise ValueError(
-                f"cell {ca['source']}/{ca['perturbation']}/{ca['level']}: "
-                f"{len(sa)} vs {len(sb)} episodes"
-            )
-        a_only = sum(1 for x, y in zip(sa, sb, strict=True) if x and not y)
-        b_only = sum(1 for x, y in zip(sa, sb, strict=True) if y and not x)
-        rows.append(
-            {
-                "source": ca["source"],
-                "perturbation": ca["perturbation"],
-                "level": ca["level"],
-                "episodes": len(sa),
-                "successes_a": sum(sa),
-                "successes_b": sum(sb),
-                "a_only": a_only,
-                "b_only": b_only,
-                "p_value": mcnemar_exact(a_only, b_only),
-                "falls_a": sum(ca["failed"]),
-                "falls_b": sum(cb["failed"]),
-            }
+        rows += pair_sources(*(load_episodes(p) for p in paths))
+    if not rows:
+        raise FileNotFoundError(
+            f"{out_dir}: no panel of the figure with both sweeps (needs {'; or '.join(missing)}); "
+            "evaluate.py --source tof and the mock with the same --out, --episodes and eval.seed"
         )
     return rows
 
@@ -146,15 +197,16 @@ def pair_folders(dir_a: str, dir_b: str, names=("a", "b")) -> list[dict]:
 
 def format_table(rows: list[dict], names=("a", "b")) -> str:
     a, b = names
+    w = max([11] + [len(r["source"]) + 2 for r in rows])
     head = (
-        f"{'source':<11}{'perturbation':<14}{'level':>7}{'n':>6}{a:>12}{b:>12}"
+        f"{'source':<{w}}{'perturbation':<14}{'level':>7}{'n':>6}{a:>12}{b:>12}"
         f"{a + ' only':>12}{b + ' only':>12}{'McNemar p':>11}{'falls ' + a:>12}{'falls ' + b:>12}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
         n = r["episodes"]
         lines.append(
-            f"{r['source']:<11}{r['perturbation']:<14}{r['level']:>7.3g}{n:>6d}"
+            f"{r['source']:<{w}}{r['perturbation']:<14}{r['level']:>7.3g}{n:>6d}"
             f"{r['successes_a'] / n:>12.3f}{r['successes_b'] / n:>12.3f}{r['a_only']:>12d}"
             f"{r['b_only']:>12d}{r['p_value']:>11.3g}{r['falls_a']:>12d}{r['falls_b']:>12d}"
         )
@@ -163,16 +215,28 @@ def format_table(rows: list[dict], names=("a", "b")) -> str:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("a", help="NAME=OUT_DIR of the first evaluation (evaluate.py --out)")
-    ap.add_argument("b", help="NAME=OUT_DIR of the second evaluation")
+    ap.add_argument("a", nargs="?", help="NAME=OUT_DIR of the first evaluation (evaluate.py --out)")
+    ap.add_argument("b", nargs="?", help="NAME=OUT_DIR of the second evaluation")
+    ap.add_argument(
+        "--figure",
+        metavar="OUT_DIR",
+        help="instead: tof against each panel's mock within one robustness-figure folder",
+    )
     ap.add_argument("--out", help="write the paired rows as CSV")
     args = ap.parse_args(argv)
+    if (args.figure is None) == (args.a is None or args.b is None) or (args.figure and args.a):
+        raise SystemExit("error: give two NAME=OUT_DIR evaluations, or --figure OUT_DIR alone")
     try:
-        (na, da), (nb, db) = parse_branch(args.a), parse_branch(args.b)
-        rows = pair_folders(da, db, (na, nb))
+        if args.figure:
+            names = ("tof", "mock")
+            rows = pair_figure(args.figure)
+        else:
+            (na, da), (nb, db) = parse_branch(args.a), parse_branch(args.b)
+            names = (na, nb)
+            rows = pair_folders(da, db, names)
     except (ValueError, FileNotFoundError) as e:
         raise SystemExit(f"error: {e}") from None
-    print(format_table(rows, (na, nb)))
+    print(format_table(rows, names))
     if args.out:
         with open(args.out + ".tmp", "w", newline="") as f:
             w = csv.DictWriter(f, fieldnames=PAIRED_KEYS, lineterminator="\n")

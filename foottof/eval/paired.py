@@ -224,7 +224,8 @@ def main(argv=None) -> None:
     )
     ap.add_argument("--out", help="write the paired rows as CSV")
     args = ap.parse_args(argv)
-    if (args.figure is None) == (args.a is None or args.b is None) or (args.figure and args.a):
+    positional = [x for x in (args.a, args.b) if x is not None]
+    if (args.figure is None and len(positional) != 2) or (args.figure is not None and positional):
         raise SystemExit("error: give two NAME=OUT_DIR evaluations, or --figure OUT_DIR alone")
     try:
         if args.figure:

@@ -43,6 +43,15 @@ def test_unknown_step_names_the_saved_ones():
         levels.level_counts(RUN, step=1)
 
 
+def test_cli_names_a_bad_run_dir_in_one_line(tmp_path):
+    step_dir = tmp_path / "checkpoints" / "50"
+    step_dir.mkdir(parents=True)
+    with pytest.raises(SystemExit, match=r"^error: no checkpoint in .*give its run directory"):
+        levels.main([str(step_dir)])
+    with pytest.raises(SystemExit, match=r"^error: step=1 is not a checkpoint"):
+        levels.main([RUN, "--step", "1"])
+
+
 def test_cli_prints_one_row_per_type(capsys):
     levels.main([RUN])
     out = capsys.readouterr().out.splitlines()

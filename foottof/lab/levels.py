@@ -30,7 +30,10 @@ def _manager(run_dir: str) -> ocp.CheckpointManager:
     """Read-only orbax manager of ``run_dir``'s checkpoints (creates nothing on a bad path)."""
     root = os.path.abspath(os.path.join(run_dir, CHECKPOINT_SUBDIR))
     if not os.path.isdir(root):
-        raise FileNotFoundError(f"no checkpoint in {root}")
+        hint = ""
+        if os.path.basename(os.path.normpath(run_dir)).isdigit():
+            hint = f"; {run_dir} looks like one checkpoint: give its run directory and --step"
+        raise FileNotFoundError(f"no checkpoint in {root}{hint}")
     return ocp.CheckpointManager(root, options=ocp.CheckpointManagerOptions(create=False))
 
 
@@ -124,8 +127,11 @@ def main(argv: list[str] | None = None) -> None:
     p.add_argument("run_dir", help="run directory of train.py (or a policies/ folder)")
     p.add_argument("--step", type=int, default=None, help="checkpoint number (default: latest)")
     a = p.parse_args(argv)
-    step = resolve_step(a.run_dir, a.step)
-    counts = level_counts(a.run_dir, step)
+    try:
+        step = resolve_step(a.run_dir, a.step)
+        counts = level_counts(a.run_dir, step)
+    except (FileNotFoundError, ValueError) as e:
+        raise SystemExit(f"error: {e}") from None
     print(f"envs per curriculum level, checkpoint {step}")
     print(format_table(counts))
 

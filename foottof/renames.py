@@ -29,6 +29,14 @@ ADDED_FIELDS = {
     "terrain.stretch_prob": 0.0,  # off: every episode on its curriculum level's row
     "terrain.stretch_min_level": 7,  # read only when stretch_prob is on
     "network.obs_skip": False,  # off: the heads read the LSTM output only
+    "reward.scales.task": 0.0,  # off: no position reward in the last task_window_s
+    "reward.task_window_s": 2.0,  # read only when the task term is on
+    "reward.guidance_goal_pay": True,  # guidance pays full credit within the success radius
+    "reward.guidance_decay_start_iteration": 0,  # read only when the decay end is > 0
+    "reward.guidance_decay_end_iteration": 0,  # 0: the guidance bias never decays
+    "reward.stall_toward_goal": False,
+    "reward.overall_scale": 1.0,  # every reward term as scaled
+    "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)  # stall: slow in any direction (not toward the goal)
 }
 
 

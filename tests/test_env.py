@@ -2,10 +2,11 @@
 
 import jax
 import jax.numpy as jp
+import ml_collections
 import numpy as np
 import pytest
 
-from configs import smoke
+from configs import _reward, smoke
 from foottof import constants
 from foottof.envs import make_env
 from foottof.envs import rewards as rw
@@ -267,6 +268,8 @@ def _inputs(**kw):
         knee_contact=jp.zeros(4),
         foot_edge=jp.zeros(4),
         foot_clearance=jp.full(4, 0.5),
+        time_left_s=jp.asarray(5.0),
+        guidance_weight=jp.asarray(1.0),
     )
     base.update(kw)
     return rw.RewardInputs(**base)
@@ -339,6 +342,131 @@ def test_reward_terms_hand_checked():
     scaled = rw.scaled_terms({k: jp.asarray(1.0) for k in rw.REWARD_TERMS}, rcfg.scales, 0.02)
     assert float(scaled["reach"]) == pytest.approx(rcfg.scales.reach)
     assert float(scaled["torques"]) == pytest.approx(rcfg.scales.torques * 0.02)
+
+
+def test_arrive_task_terms_hand_checked():
+    """The anchors' task (configs/_reward.arrive): window, goal pay, bias weight, stall."""
+    cfg = _cfg()
+    _reward.arrive(cfg)
+    r = cfg.reward
+
+    def terms(**kw):
+        return {k: float(v) for k, v in rw.compute_terms(_inputs(**kw), r, 0.02).items()}
+
+    # Task: goal (3, 4) is 5 m away -> 1 / (2 s * (1 + 25)) per s inside the 2 s window only.
+    assert terms(time_left_s=jp.asarray(1.0))["task"] == pytest.approx(1.0 / 52.0)
+    assert terms(time_left_s=jp.asarray(0.0))["task"] == pytest.approx(1.0 / 52.0)
+    assert terms(time_left_s=jp.asarray(2.5))["task"] == 0.0
+    # ... at the goal 1 / 2 per s; 0.5 m away 1 / (2 * 1.25) = 0.4 per s.
+    at = terms(goal_xy=jp.array([0.0, 0.0]), time_left_s=jp.asarray(0.5))["task"]
+    assert at == pytest.approx(0.5)
+    half = terms(goal_xy=jp.array([0.3, 0.4]), time_left_s=jp.asarray(0.5))["task"]
+    assert half == pytest.approx(0.4)
+    # ... and the whole window (100 steps of 0.02 s, time left 1.98 .. 0) pays 10 / (1 + d^2).
+    total = sum(
+        rw.scaled_terms(
+            rw.compute_terms(
+                _inputs(goal_xy=jp.array([0.3, 0.4]), time_left_s=jp.asarray(k * 0.02)), r, 0.02
+            ),
+            r.scales,
+            0.02,
+        )["task"]
+        for k in range(0, 101)  # time left 2.0 (k = 100) is outside the window
+    )
+    assert float(total) == pytest.approx(10.0 / 1.25, rel=1e-4)
+    # Guidance: progress toward the goal, capped at 0.6 m/s, nothing at the goal, times the weight.
+    assert terms(base_lin_vel=jp.array([0.3, 0.4, 0.0]))["guidance"] == pytest.approx(0.5)
+    assert terms(base_lin_vel=jp.array([3.0, 4.0, 0.0]))["guidance"] == pytest.approx(0.6)
+    w = jp.asarray(0.25)
+    assert terms(base_lin_vel=jp.array([3.0, 4.0, 0.0]), guidance_weight=w)[
+        "guidance"
+    ] == pytest.approx(0.15)
+    assert terms(goal_xy=jp.array([0.3, 0.0]), base_lin_vel=jp.array([1.0, 0, 0]))[
+        "guidance"
+    ] == pytest.approx(0.0)
+    # Stall on progress: 1 m/s along (0.8, -0.6), perpendicular to the goal direction (0.6, 0.8),
+    # stalls; 0.3 m/s toward the goal does not.
+    assert terms(base_lin_vel=jp.array([0.8, -0.6, 0.0]))["stall"] == 1.0
+    assert terms(base_lin_vel=jp.array([0.18, 0.24, 0.0]))["stall"] == 0.0
+    assert terms(base_lin_vel=jp.array([0.06, 0.08, 0.0]))["stall"] == 1.0  # 0.1 < 0.2 m/s
+    # The old task's stall: the same sideways walk is moving.
+    assert _terms(base_lin_vel=jp.array([0.8, -0.6, 0.0]))["stall"] == 0.0
+    # The old task pays no task term (scale 0) and full guidance at the goal.
+    assert _cfg().reward.scales.task == 0.0
+
+
+def test_guidance_weight_counts_training_steps_across_resets(env):
+    """The env's step counter (info['env_steps']) survives auto-resets and sets the bias weight:
+    decay over iterations 0-2 at 2 steps per iteration, 3-step episodes."""
+    cfg = _cfg()
+    _reward.arrive(cfg)
+    cfg.reward.guidance_decay_start_iteration = 0
+    cfg.reward.guidance_decay_end_iteration = 2
+    cfg.ppo.num_steps = 2
+    cfg.env.episode_length_s = 0.06  # 3 control steps
+    aenv = make_env(cfg)
+    state = jax.jit(aenv.reset)(jax.random.PRNGKey(3))
+    assert int(state.info["env_steps"]) == 0
+    step = jax.jit(aenv.step)
+    weights, dones = [], []
+    for _ in range(5):
+        state = step(state, jp.zeros(12))
+        weights.append(float(state.metrics["task/guidance_weight"]))
+        dones.append(float(state.done))
+    # counter before step k (1-based) is k - 1 -> iteration (k - 1) / 2 -> weight 1 - it / 2
+    np.testing.assert_allclose(weights, [1.0, 0.75, 0.5, 0.25, 0.0])
+    assert dones[2] == 1.0  # the deadline reset the episode, not the counter
+    assert int(state.info["env_steps"]) == 5
+    # without the decay the env carries no counter and the weight is 1
+    assert "env_steps" not in env.reset(jax.random.PRNGKey(3)).info
+
+
+def test_actor_terrain_adds_the_teachers_inputs():
+    """env.actor_terrain appends the critic's foot patches (36) and the first 117 scan points
+    (x <= 0.6 m) to the actor's observation; the rest is unchanged."""
+    from foottof.envs.anymal_tof import ACTOR_SCAN_POINTS, critic_scan_points
+
+    cfg = _cfg()
+    cfg.env.critic_height_scan = True
+    plain = make_env(cfg).reset(jax.random.PRNGKey(4))
+    cfg.env.actor_terrain = True
+    teacher = make_env(cfg).reset(jax.random.PRNGKey(4))
+    n = plain.obs["state"].shape[-1]
+    assert ACTOR_SCAN_POINTS == 117
+    assert float(jp.max(critic_scan_points()[:ACTOR_SCAN_POINTS, 0])) == pytest.approx(0.6)
+    assert float(jp.min(critic_scan_points()[ACTOR_SCAN_POINTS:, 0])) > 0.6
+    assert teacher.obs["state"].shape[-1] == n + 36 + 117
+    np.testing.assert_array_equal(teacher.obs["state"][:n], plain.obs["state"])
+    np.testing.assert_array_equal(teacher.obs["privileged_state"], plain.obs["privileged_state"])
+    priv = plain.obs["privileged_state"]
+    m = n  # the critic's clean copy of the actor obs comes first, then the 36 foot heights
+    np.testing.assert_allclose(teacher.obs["state"][n : n + 36], priv[m : m + 36])
+    np.testing.assert_allclose(teacher.obs["state"][n + 36 :], priv[-171:][:117])
+
+
+def test_guidance_weight_schedule():
+    # 1 until 500, linear to 0 at 1500, 0 after; no decay (end 0) -> always 1.
+    its = jp.array([0.0, 500.0, 750.0, 1000.0, 1500.0, 4000.0])
+    np.testing.assert_allclose(
+        np.asarray(rw.guidance_weight(its, 500, 1500)), [1.0, 1.0, 0.75, 0.5, 0.0, 0.0]
+    )
+    np.testing.assert_allclose(np.asarray(rw.guidance_weight(its, 0, 0)), np.ones(6))
+
+
+def test_reward_scales_added_terms_default_off():
+    # A config saved before the task term existed: check_scales accepts it, the term scales to 0.
+    scales = dict(_cfg().reward.scales)
+    del scales["task"]
+    rw.check_scales(scales)
+    ones = {k: jp.asarray(1.0) for k in rw.REWARD_TERMS}
+    assert float(rw.scaled_terms(ones, ml_collections.ConfigDict(scales), 0.02)["task"]) == 0.0
+    # overall_scale multiplies every term, dense and sparse
+    tenth = rw.scaled_terms(ones, ml_collections.ConfigDict(scales), 0.02, 0.1)
+    assert float(tenth["reach"]) == pytest.approx(0.1 * scales["reach"])
+    assert float(tenth["torques"]) == pytest.approx(0.1 * 0.02 * scales["torques"])
+    del scales["reach"]  # not an added term: still an error
+    with pytest.raises(ValueError, match="missing term.*reach"):
+        rw.check_scales(scales)
 
 
 def test_bad_inputs():

@@ -195,11 +195,21 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
         **dict(foot_vel=jp.ones((4, 3)), foot_contact=jp.zeros(4), q=pose, default_q=pose),
         **dict(time_s=jp.asarray(5.0), failed=jp.asarray(0.0), truncated=jp.asarray(0.0)),
         **dict(knee_contact=jp.zeros(4), foot_edge=jp.zeros(4), foot_clearance=jp.full(4, 0.02)),
+        **dict(time_left_s=jp.asarray(1.0), guidance_weight=jp.asarray(1.0)),  # in the window
     )
     terms = lambda c: rewards.compute_terms(x, c.reward, 0.02)  # noqa: E731
     assert float(terms(new)["foot_clearance"]) > 0.0
     for name, value in terms(old).items():
         assert jp.allclose(value, terms(new)[name]), name
+    # ... and scale alike: an absent added term (reward.scales.task) scales to its default, off
+    def scaled(c):
+        overall = c.reward.get("overall_scale", renames.added_default("reward.overall_scale"))
+        return rewards.scaled_terms(terms(c), c.reward.scales, 0.02, overall)
+
+    for name, value in scaled(old).items():
+        assert jp.allclose(value, scaled(new)[name]), name
+    new.reward.scales.task = 10.0  # away from the default: paid in the window
+    assert float(scaled(new)["task"]) > 0.0 == float(scaled(old)["task"])
     new.reward.clearance_target_m = 0.2  # away from the default: the term differs
     assert not jp.allclose(terms(old)["foot_clearance"], terms(new)["foot_clearance"])
     from foottof.ppo.networks import make_networks

@@ -44,7 +44,11 @@ EPISODE_METRICS = (
     "curriculum/level",
     "episode/speed_mps",
 )
-STEP_METRICS = ("task/speed_mps", "task/feet_at_edges")  # averaged over all steps by the trainer
+# averaged over all steps by the trainer
+STEP_METRICS = ("task/speed_mps", "task/feet_at_edges", "task/guidance_weight")
+# State.info key of each env's control steps since training began (only where the guidance bias
+# decays, reward.guidance_decay_end_iteration > 0); checkpointed with the env state.
+ENV_STEPS_KEY = "env_steps"
 
 
 @dataclasses.dataclass(frozen=True)
@@ -82,6 +86,9 @@ class TaskSpec:
     spawn_height_offset_m: float
     clip_observations: float
     critic_height_scan: bool
+    actor_terrain: bool
+    guidance_decay: tuple[int, int]  # (start, end) training iteration; end 0: no decay
+    steps_per_iteration: int  # control steps each env takes per training iteration
 
     @classmethod
     def from_config(cls, cfg) -> TaskSpec:
@@ -119,7 +126,31 @@ class TaskSpec:
             spawn_height_offset_m=float(e.spawn_height_offset_m),
             clip_observations=float(e.clip_observations),
             critic_height_scan=bool(e.get("critic_height_scan", False)),
+            actor_terrain=bool(e.get("actor_terrain", added_default("env.actor_terrain"))),
+            guidance_decay=_guidance_decay(cfg.reward),
+            steps_per_iteration=int(cfg.ppo.num_steps),
         )
+
+
+def _guidance_decay(rcfg) -> tuple[int, int]:
+    """(start, end) iterations of the guidance bias decay (end 0: none), checked."""
+    start = int(
+        rcfg.get(
+            "guidance_decay_start_iteration",
+            added_default("reward.guidance_decay_start_iteration"),
+        )
+    )
+    end = int(
+        rcfg.get(
+            "guidance_decay_end_iteration", added_default("reward.guidance_decay_end_iteration")
+        )
+    )
+    if end > 0 and not 0 <= start < end:
+        raise ValueError(
+            f"reward.guidance_decay_start_iteration={start} must be in [0, "
+            f"reward.guidance_decay_end_iteration={end}) when the decay is on (end > 0)"
+        )
+    return start, end
 
 
 class StepKinematics(NamedTuple):
@@ -212,6 +243,13 @@ def critic_height_scan(height_at, base_pos: jax.Array, base_quat: jax.Array) -> 
     rot = jp.array([[fwd[0], -fwd[1]], [fwd[1], fwd[0]]])  # yaw rotation
     pts = base_pos[None, 0:2] + critic_scan_points() @ rot.T
     return jp.clip(height_at(pts) - base_pos[2], -1.0, 1.0)
+
+
+# The teacher's scan (env.actor_terrain): the critic scan's rows up to 0.6 m ahead of the base
+# (13 x 9 = 117 points), about as far as the front feet's ToF sensors have looked; the 1.2 m of
+# the critic's would let a teacher act on terrain no student has seen.
+ACTOR_SCAN_ROWS = 13
+ACTOR_SCAN_POINTS = ACTOR_SCAN_ROWS * 9
 
 
 def critic_scan_points() -> jax.Array:
@@ -363,8 +401,10 @@ class AnymalToFEnv(Env):
         step = task.step + 1
         kin = self._step_kinematics(d)
         ends = self._terminations(d, kin, step, diverged)
+        env_steps = state.info.get(ENV_STEPS_KEY)
+        weight = self._guidance_weight(env_steps)
         reward, terms, success, dist = self._rewards(
-            d, kin, task, action, taus, ends, step, diverged
+            d, kin, task, action, taus, ends, step, diverged, weight
         )
         next_d, next_task = self._auto_reset(key_reset, d, task, action, step, success, ends, rng)
         # Sensing on the selected pose: one ray cast per step; buffers restart where done.
@@ -386,9 +426,12 @@ class AnymalToFEnv(Env):
                 "episode/speed_mps": speed,
                 "task/speed_mps": speed,
                 "task/feet_at_edges": jp.sum(kin.foot_edge),
+                "task/guidance_weight": weight,
             }
         )
         info = dict(state.info)
+        if env_steps is not None:  # kept across auto-resets: it counts training, not an episode
+            info[ENV_STEPS_KEY] = env_steps + 1
         # The deadline is part of this task (time left is observed, reach pays at the last step):
         # bootstrapping V there would pay the at-goal value again forever (10 / (1 - gamma)).
         bootstrap = ends.truncated & self.spec.bootstrap_time_limit
@@ -467,8 +510,27 @@ class AnymalToFEnv(Env):
         truncated = (step >= self.episode_steps) & ~failed
         return Ends(failed, truncated, failed | truncated, knee_contact, stuck)
 
+    def _guidance_weight(self, env_steps) -> jax.Array:
+        """The guidance bias weight (rewards.guidance_weight) from this env's step counter: each
+        env steps ``ppo.num_steps`` times per training iteration, so counter / num_steps is the
+        iterations done (1 where the decay is off)."""
+        start, end = self.spec.guidance_decay
+        if env_steps is None:  # static: the decay is off
+            return jp.ones(())
+        iteration = env_steps.astype(jp.float32) / float(self.spec.steps_per_iteration)
+        return rw.guidance_weight(iteration, start, end)
+
     def _rewards(
-        self, d, kin: StepKinematics, task: TaskState, action, taus, ends: Ends, step, diverged
+        self,
+        d,
+        kin: StepKinematics,
+        task: TaskState,
+        action,
+        taus,
+        ends: Ends,
+        step,
+        diverged,
+        guidance_weight,
     ):
         """(reward, clipped scaled terms, success (float), distance to the goal [m])."""
         qpos, qvel = d.qpos, d.qvel
@@ -488,14 +550,20 @@ class AnymalToFEnv(Env):
             q=qpos[7:19],
             default_q=self._default_q,
             time_s=step.astype(jp.float32) * self.dt,
+            time_left_s=(self.episode_steps - step).astype(jp.float32) * self.dt,
+            guidance_weight=guidance_weight,
             failed=ends.failed.astype(jp.float32),
             truncated=ends.truncated.astype(jp.float32),
             knee_contact=ends.knee_contact,
             foot_edge=kin.foot_edge,
             foot_clearance=kin.foot_clearance,
         )
+        rcfg = self.cfg.reward
         terms = rw.scaled_terms(
-            rw.compute_terms(rin, self.cfg.reward, self.dt), self.cfg.reward.scales, self.dt
+            rw.compute_terms(rin, rcfg, self.dt),
+            rcfg.scales,
+            self.dt,
+            float(rcfg.get("overall_scale", added_default("reward.overall_scale"))),
         )
         clip = self.spec.clip_reward
         terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
@@ -606,13 +674,16 @@ class AnymalToFEnv(Env):
         zero = jp.zeros(())
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
         metrics.update({k: zero for k in EPISODE_METRICS + STEP_METRICS})
+        info = {"task": task, "sensor": sensor_state, "truncation": zero}
+        if self.spec.guidance_decay[1] > 0:  # static: count this env's steps for the decay
+            info[ENV_STEPS_KEY] = jp.zeros((), jp.int32)
         return State(
             pipeline_state=d,
             obs=obs,
             reward=zero,
             done=zero,
             metrics=metrics,
-            info={"task": task, "sensor": sensor_state, "truncation": zero},
+            info=info,
         )
 
     def _reset_core(self, key, level, col):
@@ -666,7 +737,9 @@ class AnymalToFEnv(Env):
         velocities (12, noisy, x0.05) + projected gravity (3) + base linear velocity estimate (3,
         base frame) + base angular velocity estimate (3, x0.25) + goal distance (1, clipped at
         5 m) + goal direction in the base frame (2, unit) + time left (1, fraction) + last
-        action (12).
+        action (12); with ``env.actor_terrain`` (a teacher) also the true terrain heights
+        around each foot (4 x 9, as the critic's) and the base scan up to 0.6 m ahead (117, the
+        first ACTOR_SCAN_ROWS rows of the critic's).
         Critic ``privileged_state``: the same without noise (true readings, joints, velocities)
         + true terrain heights around each foot relative to the foot centre (4 x 9, 10 cm grid)
         + foot contacts (4) + friction (1) + added base mass (1, x0.1) + with
@@ -719,9 +792,14 @@ class AnymalToFEnv(Env):
             p.friction[None],  # 1
             p.added_mass_kg[None] * 0.1,  # 1
         ]
+        scan = None
+        if self.spec.critic_height_scan or self.spec.actor_terrain:  # static
+            scan = critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat)  # 171
         if self.spec.critic_height_scan:
-            parts.append(critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat))  # 171
+            parts.append(scan)
         priv = jp.concatenate(parts)
+        if self.spec.actor_terrain:  # static: a teacher's actor also sees the terrain, true
+            state_obs = jp.concatenate([state_obs, parts[1], scan[:ACTOR_SCAN_POINTS]])
         lim = self.spec.clip_observations
         return {
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),

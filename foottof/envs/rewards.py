@@ -6,10 +6,11 @@ import jax
 import jax.numpy as jp
 from flax import struct
 
-from foottof.renames import added_default
+from foottof.renames import ADDED_FIELDS, added_default
 
 # Terms that are rates (multiplied by the control dt) vs. events (counted once).
 DENSE_TERMS = (
+    "task",
     "guidance",
     "torques",
     "joint_acc",
@@ -48,6 +49,8 @@ class RewardInputs:
       foot_edge: (4,) 1.0 where a foot touches the terrain next to a height step (`foot_edges`).
       foot_clearance: (4,) height of each foot's bottom above the highest terrain around it
         (`foot_clearances`) [m]; zeros where the foot_clearance term is off.
+      time_left_s: time until the episode's deadline after this step [s] (0 at the last step).
+      guidance_weight: weight of the guidance bias this step, in [0, 1] (`guidance_weight`).
     """
 
     base_pos: jax.Array
@@ -69,6 +72,25 @@ class RewardInputs:
     knee_contact: jax.Array
     foot_edge: jax.Array
     foot_clearance: jax.Array
+    time_left_s: jax.Array
+    guidance_weight: jax.Array
+
+
+def guidance_weight(iteration: jax.Array, start_iteration: int, end_iteration: int) -> jax.Array:
+    """Weight of the guidance bias after ``iteration`` training iterations: 1 until
+    ``start_iteration``, then linearly down to 0 at ``end_iteration`` and 0 after (Zhang et al.
+    2024 pay their move-in-direction reward only early in training; Rudin et al. 2022 remove
+    their bias once the task is learned). ``end_iteration <= 0`` means no decay: always 1.
+
+    Args:
+      iteration: training iterations done (float or int, traced).
+      start_iteration, end_iteration: the decay's start and end (static ints, start < end).
+    """
+    if end_iteration <= 0:
+        return jp.ones_like(jp.asarray(iteration, jp.float32))
+    span = float(end_iteration - start_iteration)
+    w = (float(end_iteration) - jp.asarray(iteration, jp.float32)) / span
+    return jp.clip(w, 0.0, 1.0)
 
 
 def _probe_heights(foot_pos: jax.Array, height_at, radius_m: float) -> jax.Array:
@@ -151,14 +173,25 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
     peaked = rcfg.get("guidance_peaked", added_default("reward.guidance_peaked"))
     if peaked:  # static: above vmax the pay falls as it rose
         paid = jp.where(v_toward > vmax, jp.maximum(2.0 * vmax - v_toward, -vmax), paid)
-    guidance = jp.where(at_goal > 0, vmax, paid)
-    speed = jp.linalg.norm(x.base_lin_vel[:2])
+    goal_pay = rcfg.get("guidance_goal_pay", added_default("reward.guidance_goal_pay"))
+    # static: full credit within the success radius (the old task), or nothing paid there
+    guidance = jp.where(at_goal > 0, vmax if goal_pay else 0.0, paid) * x.guidance_weight
+    # Task (Rudin et al. 2022): 1 / (T_r (1 + d^2)) per second, paid only in the last T_r seconds,
+    # so the window pays 1 / (1 + d^2) in all however early the goal was reached.
+    window = float(rcfg.get("task_window_s", added_default("reward.task_window_s")))
+    in_window = (x.time_left_s < window - 0.5 * control_dt_s).astype(jp.float32)
+    task = in_window / (window * (1.0 + jp.square(dist)))
+    # Stall: slow (or, with stall_toward_goal, slow toward the goal: walking about does not
+    # count as moving) and outside the success radius, after the grace period.
+    toward = rcfg.get("stall_toward_goal", added_default("reward.stall_toward_goal"))
+    speed = v_toward if toward else jp.linalg.norm(x.base_lin_vel[:2])  # static
     stalling = (speed < rcfg.stall_speed_mps) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
     target = rcfg.get("clearance_target_m", added_default("reward.clearance_target_m"))
     return {
         "reach": x.truncated * at_goal,
         "termination": x.failed,
+        "task": task,
         "guidance": guidance,
         "torques": jp.sum(jp.square(x.torques)),
         "joint_acc": jp.sum(jp.square((x.qvel - x.last_qvel) / control_dt_s)),
@@ -181,13 +214,28 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
     }
 
 
-def scaled_terms(terms: dict[str, jax.Array], scales, control_dt_s: float) -> dict[str, jax.Array]:
-    """Scale each term by config; dense terms are also multiplied by the control dt."""
+def scaled_terms(
+    terms: dict[str, jax.Array], scales, control_dt_s: float, overall: float = 1.0
+) -> dict[str, jax.Array]:
+    """Scale each term by config; dense terms are also multiplied by the control dt.
+
+    ``overall`` (``reward.overall_scale``) multiplies every term: it leaves every ratio of the
+    reward, and so what it prices, unchanged, and scales the value targets (with normalized
+    advantages the policy gradient does not change, the value loss by ``overall**2``)."""
     out = {}
     for name in REWARD_TERMS:
         dt = control_dt_s if name in DENSE_TERMS else 1.0
-        out[name] = terms[name] * float(getattr(scales, name)) * dt
+        out[name] = terms[name] * scale_of(scales, name) * dt * float(overall)
     return out
+
+
+def scale_of(scales, name: str) -> float:
+    """The scale of term ``name``; a term added after a config was saved takes its old-behaviour
+    default (renames.ADDED_FIELDS: off)."""
+    field = f"reward.scales.{name}"
+    if name not in scales and field in ADDED_FIELDS:
+        return float(ADDED_FIELDS[field])
+    return float(scales[name])
 
 
 def total_reward(terms: dict[str, jax.Array], only_positive: bool, valid: jax.Array) -> jax.Array:
@@ -214,7 +262,10 @@ def check_scales(scales) -> None:
     """Raise ValueError for unknown or missing reward terms in `reward.scales`."""
     keys = set(scales.keys())
     unknown = sorted(keys - set(REWARD_TERMS))
-    missing = sorted(set(REWARD_TERMS) - keys)
+    # terms added after a config was saved may be absent: they take their old default (off)
+    missing = sorted(
+        k for k in set(REWARD_TERMS) - keys if f"reward.scales.{k}" not in ADDED_FIELDS
+    )
     if unknown:
         raise ValueError(f"unknown reward term(s) {unknown}; valid terms: {list(REWARD_TERMS)}")
     if missing:

@@ -408,6 +408,12 @@ _INPUT_LEAVES = (
     "['critic']['dense_0']['kernel']",  # the critic head's first layer (mlp policy, obs_skip)
     "['actor']['dense_0']['kernel']",  # the actor head's first layer (mlp policy, obs_skip)
     "['privileged_state']",  # normalizer mean / std / summed_variance
+    # the actor's inputs, grown by env.actor_terrain (a teacher from a sensor-only policy)
+    "['memory_a']['lstm_0']['ii']['kernel']",
+    "['memory_a']['lstm_0']['if']['kernel']",
+    "['memory_a']['lstm_0']['ig']['kernel']",
+    "['memory_a']['lstm_0']['io']['kernel']",
+    "['state']",  # normalizer
 )
 _GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, not 'rollout'
 

@@ -155,7 +155,7 @@ def run_config_path(checkpoint: str) -> str | None:
 
 
 # Env fields that shape the network's inputs: taken from the run config along with c.network.
-RUN_INPUT_FIELDS = ("critic_height_scan",)
+RUN_INPUT_FIELDS = ("critic_height_scan", "actor_terrain")
 
 
 def with_run_network(cfg, checkpoint: str | None):

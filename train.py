@@ -58,8 +58,22 @@ def main(argv):
     from foottof.ppo.checkpoint import CheckpointUnreadable
 
     try:
-        env = make_training_env(cfg)
-        runner.run(cfg, env, run_dir, resume=_RESUME.value, init_from=init_from, latest_link=latest)
+        init_params = None
+        if t.get("teacher", ""):  # distillation: the teacher's env and the student's init
+            from foottof.ppo import distill
+
+            env, init_params = distill.make_distill_env(cfg)
+        else:
+            env = make_training_env(cfg)
+        runner.run(
+            cfg,
+            env,
+            run_dir,
+            resume=_RESUME.value,
+            init_from=init_from,
+            latest_link=latest,
+            init_params=init_params,
+        )
     except (
         ValueError,
         FileNotFoundError,

@@ -52,5 +52,6 @@ def get_train_section() -> ml_collections.ConfigDict:
     c.max_checkpoints = 5  # checkpoints kept on disk (oldest deleted first)
     c.checkpoint_env_state = True  # save env state + LSTM carries: resume is bit-exact
     c.tensorboard = True  # write TensorBoard event files (tensorboardX) next to metrics.csv
+    c.teacher = ""  # a run or policy folder: distil it into this run's policy (DAgger), not PPO
     c.log_every = 1  # print a progress line every N iterations (CSV/TensorBoard get every one)
     return c

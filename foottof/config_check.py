@@ -303,6 +303,7 @@ RULES = {
     "train.tensorboard": _bool,
     "train.log_every": _int(1),
     "train.init_from": _path,
+    "train.teacher": _path,
     # eval
     "eval.episodes": _int(1),
     "eval.num_envs": _int(1),

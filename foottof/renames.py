@@ -36,6 +36,7 @@ ADDED_FIELDS = {
     "reward.guidance_decay_end_iteration": 0,  # 0: the guidance bias never decays
     "reward.stall_toward_goal": False,
     "reward.overall_scale": 1.0,  # every reward term as scaled
+    "train.teacher": "",  # PPO, no distillation
     "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)  # stall: slow in any direction (not toward the goal)
 }
 

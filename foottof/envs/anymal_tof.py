@@ -250,6 +250,7 @@ def critic_height_scan(height_at, base_pos: jax.Array, base_quat: jax.Array) -> 
 # the critic's would let a teacher act on terrain no student has seen.
 ACTOR_SCAN_ROWS = 13
 ACTOR_SCAN_POINTS = ACTOR_SCAN_ROWS * 9
+ACTOR_TERRAIN_INPUTS = 4 * 9 + ACTOR_SCAN_POINTS  # what env.actor_terrain appends (153)
 
 
 def critic_scan_points() -> jax.Array:

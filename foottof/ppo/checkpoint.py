@@ -483,7 +483,9 @@ def _grow(name: str, value: Any, shape: tuple, count: float) -> np.ndarray:
     return np.concatenate([value, pad], axis=0)
 
 
-def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple[Any, Any]:
+def load_params_and_normalizer(
+    path: str, params: Any, normalizer: Any, grow: bool = True
+) -> tuple[Any, Any]:
     """Params + normalizer of another run (init_from), shaped like `params`/`normalizer`.
 
     A run whose critic reads more inputs than the saved one's (inputs appended at the end, e.g.
@@ -494,6 +496,8 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
     Args:
       path: a run directory, its checkpoints/ folder, or one checkpoint's step folder.
       params, normalizer: the current model's (initialized) values; give structure and sharding.
+      grow: grow input leaves the saved network has fewer of (init_from); False: every leaf must
+        match (a teacher, whose inputs must be the env's).
 
     Raises:
       FileNotFoundError if there is no checkpoint there; CheckpointUnreadable (one line: path
@@ -532,7 +536,7 @@ def load_params_and_normalizer(path: str, params: Any, normalizer: Any) -> tuple
         for item, sub in target.items():
             if item not in manifest:
                 raise CheckpointUnreadable(f"{step_dir}: the checkpoint has no {item!r} item")
-            grown[item] = _grown_leaves(manifest[item], sub)
+            grown[item] = _grown_leaves(manifest[item], sub) if grow else {}
             saved_like[item] = _shaped_as_saved(sub, grown[item])
             check_compatible(
                 item, manifest[item], saved_like[item], f"init_from {directory}/{step}"

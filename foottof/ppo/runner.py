@@ -230,6 +230,7 @@ def run(
     init_from: str | None = None,
     on_iteration: Callable[[int, dict, train_lib.TrainState], None] | None = None,
     latest_link: str | None = None,
+    init_params: Callable | None = None,
 ) -> train_lib.TrainState:
     """Trains for cfg.train.num_iterations iterations (counted from the start of the run).
 
@@ -244,6 +245,8 @@ def run(
         stage 1); optimizer state, iteration and envs start fresh.
       on_iteration: callback(iteration, metrics, state) after each iteration (and after the NaN
         guard); `state` is donated to the next iteration, so use it only inside the callback.
+      init_params: (params, normalizer) -> (params, normalizer) or None: the initial values of a
+        new run without init_from (a distilled student cut from its teacher); None keeps them.
       latest_link: a symlink pointed at run_dir when the run starts (see
         run_dir.resolve_run_dir); if the run ends without any checkpoint, the link goes back to
         its previous target and run_dir, if this call created it, is removed.
@@ -278,7 +281,7 @@ def run(
         except FileExistsError as e:
             print(f"[runner] WARNING: {e}")
     try:
-        return _run(cfg, env, run_dir, resume, init_from, on_iteration, main)
+        return _run(cfg, env, run_dir, resume, init_from, on_iteration, main, init_params)
     finally:
         if linked and not run_dirs.has_checkpoint(run_dir):
             run_dirs.forget_run(latest_link, previous, run_dir if created else None)
@@ -296,7 +299,9 @@ def gpu_sized_warning(cfg, backend: str) -> str | None:
     )
 
 
-def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.TrainState:
+def _run(
+    cfg, env, run_dir, resume, init_from, on_iteration, main, init_params=None
+) -> train_lib.TrainState:
     """run() after the run-dir checks; see there."""
     t = cfg.train
     if main:
@@ -335,6 +340,13 @@ def _run(cfg, env, run_dir, resume, init_from, on_iteration, main) -> train_lib.
             raise
         state = state.replace(params=params, normalizer=normalizer)
         print(f"[runner] params and normalizer initialized from {init_from}")
+    elif init_params is not None:
+        initial = init_params(state.params, state.normalizer)
+        if initial is not None:
+            shardings = jax.tree.map(lambda x: x.sharding, (state.params, state.normalizer))
+            params, normalizer = jax.device_put(initial, shardings)
+            state = state.replace(params=params, normalizer=normalizer)
+            print("[runner] params and normalizer initialized by init_params")
     wall_before_s = trim_metrics(run_dir, int(state.iteration)) if (resume and main) else 0.0
 
     t0 = time.time()  # wall clock of this chunk starts before the compile

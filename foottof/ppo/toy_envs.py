@@ -23,18 +23,24 @@ class CueMemoryEnv:
       episode_length: L >= 2 steps per episode.
       privileged: if True, obs is {'state': (2,), 'privileged_state': (3,) = state + cue} (the
         critic sees the cue, the actor does not); else a (2,) array.
+      teacher: if True, obs is {'state': (3,), 'privileged_state': (3,)}, both state + cue: a
+        teacher's actor sees the cue at every step (a memoryless policy solves it), and a student
+        reading the first 2 inputs must remember it (foottof.ppo.distill).
     """
 
     action_size = 1
 
-    def __init__(self, episode_length: int = 8, privileged: bool = False):
+    def __init__(self, episode_length: int = 8, privileged: bool = False, teacher: bool = False):
         if episode_length < 2:
             raise ValueError(f"episode_length={episode_length}; must be >= 2")
         self.episode_length = int(episode_length)
         self.privileged = bool(privileged)
+        self.teacher = bool(teacher)
 
     @property
     def observation_size(self):
+        if self.teacher:
+            return {"state": (3,), "privileged_state": (3,)}
         if self.privileged:
             return {"state": (2,), "privileged_state": (3,)}
         return 2
@@ -42,6 +48,9 @@ class CueMemoryEnv:
     def _obs(self, cue, t):
         first = (t == 0).astype(jp.float32)
         state = jp.stack([cue * first, first])  # cue (shown at t=0 only), first-step flag
+        if self.teacher:
+            full = jp.concatenate([state, cue[None]])
+            return {"state": full, "privileged_state": full}
         if self.privileged:
             return {"state": state, "privileged_state": jp.concatenate([state, cue[None]])}
         return state
@@ -85,6 +94,8 @@ class CueMemoryEnv:
         )
 
 
-def make_memory_env(episode_length: int = 8, privileged: bool = False) -> VmapEnv:
+def make_memory_env(
+    episode_length: int = 8, privileged: bool = False, teacher: bool = False
+) -> VmapEnv:
     """Batched CueMemoryEnv (reset(keys (N, 2)), step(state, actions (N, 1)))."""
-    return VmapEnv(CueMemoryEnv(episode_length, privileged))
+    return VmapEnv(CueMemoryEnv(episode_length, privileged, teacher))

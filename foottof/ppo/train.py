@@ -27,7 +27,7 @@ from jax.sharding import PartitionSpec as P
 from foottof import config_check
 from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-exported)
 from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
-from foottof.ppo import losses
+from foottof.ppo import distill, losses
 from foottof.ppo import networks as net
 
 AXIS = "data"  # mesh axis over envs (all devices of all hosts)
@@ -153,6 +153,9 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
     )
 
+    # train.teacher set: distillation (foottof.ppo.distill), the imitation loss replaces PPO's
+    train_cfg = cfg.get("train", None)
+    distilling = bool(train_cfg is not None and train_cfg.get("teacher", ""))
     networks = net.make_networks(env.action_size, cfg.network)
     optimizer = _make_optimizer(float(ppo.learning_rate), float(ppo.max_grad_norm))
     mesh = Mesh(np.array(devices), (AXIS,))
@@ -261,8 +264,12 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     # ------------------------------------------------------------ update
     def _sgd_step(carry, mb: losses.Minibatch):
         params, opt_state, normalizer = carry
-        grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
-        (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
+        if distilling:  # static
+            grad_fn = jax.value_and_grad(distill.distill_loss, has_aux=True)
+            (_, metrics), grads = grad_fn(params, networks, normalizer, mb)
+        else:
+            grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
+            (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
         grads = jax.lax.pmean(grads, AXIS)
         metrics = jax.lax.pmean(metrics, AXIS)
         if adaptive:

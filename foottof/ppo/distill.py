@@ -1,0 +1,220 @@
+"""Distillation of a privileged teacher into a sensor-only student (on-policy DAgger).
+
+rsl_rl's ``Distillation`` (rsl_rl/algorithms/distillation.py, v2.3) as a variant of our PPO
+iteration: the env is stepped with the student's sampled actions, the loss is the mean squared
+error between the student's action means and the teacher's deterministic action, and the
+student's LSTM is trained by truncated backprop over each rollout with its state carried across
+iterations. Everything else (rollout, minibatches, checkpoints, resume, logging) is the PPO
+trainer's (foottof.ppo.train, foottof.ppo.runner):
+
+- :class:`TeacherEnv` wraps the batched env whose actor observation is the teacher's (the
+  student's inputs first, the privileged ones appended, e.g. ``env.actor_terrain``). It runs the
+  teacher on that observation with the teacher's LSTM carry (kept in ``State.info``, so it is
+  checkpointed with the env state and a resume is bit-exact), shows the student only the first
+  ``student_obs_size`` inputs, and puts the teacher's action in ``obs['teacher_action']``, which
+  the networks do not read and the rollout stores with the observation.
+- :func:`distill_loss` replaces the PPO loss when ``train.teacher`` is set.
+
+The student's critic is not trained here: it starts as the teacher's (same critic inputs) so
+that PPO fine-tuning (``train.init_from`` = the student) starts from a value function of the task.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import jax
+import jax.numpy as jp
+import numpy as np
+from brax.envs.base import State
+
+from foottof.ppo import networks as net
+
+TEACHER_ACTION_KEY = "teacher_action"  # obs key of the teacher's action (not a network input)
+TEACHER_OBS_KEY = "teacher_state"  # obs key of the teacher's whole actor observation
+TEACHER_CARRY_KEY = "teacher_carry"  # State.info key of the teacher's LSTM carry
+
+
+class TeacherEnv:
+    """A batched env whose observation the teacher reads, shown to a student (see module doc).
+
+    Args:
+      env: batched env (``reset(keys (N, 2))``, ``step(state, actions (N, A))``) with dict
+        observations {'state': teacher actor obs, 'privileged_state': critic obs}.
+      teacher: (Networks, params, normalizer) of the teacher.
+      student_obs_size: the student reads ``obs['state'][..., :student_obs_size]``.
+    """
+
+    def __init__(self, env, teacher, student_obs_size: int):
+        self.env = env
+        self.teacher_networks, self.teacher_params, self.teacher_normalizer = teacher
+        self.student_obs_size = int(student_obs_size)
+
+    def __getattr__(self, name):
+        return getattr(self.env, name)
+
+    def _wrap(self, state: State, carry, reset: jax.Array) -> State:
+        """The inner state seen by the student, with the teacher's action for its observation."""
+        obs = state.obs
+        carry, action, _, _ = self.teacher_networks.step(
+            self.teacher_params, self.teacher_normalizer, carry, obs, reset
+        )
+        view = dict(obs)
+        view[net.ACTOR_KEY] = obs[net.ACTOR_KEY][..., : self.student_obs_size]
+        view[TEACHER_OBS_KEY] = obs[net.ACTOR_KEY]
+        view[TEACHER_ACTION_KEY] = action
+        return state.replace(obs=view, info={**state.info, TEACHER_CARRY_KEY: carry})
+
+    def _inner(self, state: State) -> State:
+        obs = {k: v for k, v in state.obs.items() if k not in (TEACHER_OBS_KEY, TEACHER_ACTION_KEY)}
+        obs[net.ACTOR_KEY] = state.obs[TEACHER_OBS_KEY]
+        info = {k: v for k, v in state.info.items() if k != TEACHER_CARRY_KEY}
+        return state.replace(obs=obs, info=info)
+
+    def reset(self, keys: jax.Array) -> State:
+        state = self.env.reset(keys)
+        n = keys.shape[0]
+        return self._wrap(state, self.teacher_networks.init_carry(n), jp.ones((n,), bool))
+
+    def step(self, state: State, actions: jax.Array) -> State:
+        carry = state.info[TEACHER_CARRY_KEY]
+        nxt = self.env.step(self._inner(state), actions)
+        return self._wrap(nxt, carry, nxt.done.astype(bool))  # a new episode: fresh teacher carry
+
+
+def distill_loss(params, networks: net.Networks, normalizer, batch) -> tuple[jax.Array, dict]:
+    """Mean squared error between the student's action means (re-run over the rollout from its
+    stored carry) and the teacher's actions, over (T, B, A); rsl_rl's ``loss_type="mse"``.
+
+    Returns:
+      (loss, metrics): 'loss/imitation' (the loss), and for the trainer's guards and progress
+      line 'loss/policy' (= the imitation loss), 'loss/value' 0, 'loss/entropy' (of the action
+      std, not trained), 'ppo/kl' 0, 'ppo/clip_fraction' 0.
+    """
+    means, log_std, _ = networks.unroll(params, normalizer, batch.carry, batch.obs, batch.resets)
+    target = jax.lax.stop_gradient(batch.obs[TEACHER_ACTION_KEY])
+    loss = jp.mean(jp.square(means - target))
+    zero = jp.zeros(())
+    return loss, {
+        "loss/imitation": loss,
+        "loss/policy": loss,
+        "loss/value": zero,
+        "loss/entropy": jp.mean(net.gaussian_entropy(log_std)),
+        "ppo/kl": zero,
+        "ppo/clip_fraction": zero,
+    }
+
+
+def student_from_teacher(student_params, student_normalizer, teacher_params, teacher_normalizer):
+    """The student's initial params and normalizer cut from the teacher's (Extreme Parkour
+    initialises its student from the teacher's actor): every leaf copied, the actor's input
+    leaves (the LSTM input kernels, the 'state' normalizer) cut to the student's first inputs.
+    Returns None when the two networks differ otherwise (e.g. an MLP teacher, another size).
+    """
+
+    def cut(s, t):
+        s, t = np.asarray(s), np.asarray(t)
+        if s.shape == t.shape:
+            return t
+        if s.ndim >= 1 and s.shape[1:] == t.shape[1:] and s.shape[0] < t.shape[0]:
+            return t[: s.shape[0]]
+        raise ValueError(f"shape {t.shape} does not cut to {s.shape}")
+
+    try:
+        if jax.tree.structure(student_params) != jax.tree.structure(teacher_params):
+            return None
+        params = jax.tree.map(cut, student_params, teacher_params)
+        normalizer = jax.tree.map(cut, student_normalizer, teacher_normalizer)
+    except ValueError:
+        return None
+    return (
+        jax.tree.map(lambda s, x: jp.asarray(x, s.dtype), student_params, params),
+        jax.tree.map(lambda s, x: jp.asarray(x, s.dtype), student_normalizer, normalizer),
+    )
+
+
+def load_teacher(path: str, env, network_cfg):
+    """(Networks, params, normalizer) of the teacher at ``path`` (a run or policy folder, or one
+    checkpoint) for the batched ``env`` whose actor observation it must read.
+
+    Raises:
+      ValueError: one line naming the teacher and both input sizes when its actor was trained on
+        another observation layout (e.g. without env.actor_terrain).
+    """
+    from foottof.ppo import checkpoint as ckpt
+
+    shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
+    obs = jax.tree.map(lambda s: jp.zeros((1,) + s.shape[1:], s.dtype), shape.obs)
+    networks = net.make_networks(env.action_size, network_cfg)
+    params = networks.init_params(jax.random.PRNGKey(0), obs)
+    normalizer = networks.init_normalizer(obs)
+    try:
+        params, normalizer = ckpt.load_params_and_normalizer(path, params, normalizer, grow=False)
+    except ckpt.CheckpointMismatch as e:
+        want = obs[net.ACTOR_KEY].shape[-1] if isinstance(obs, dict) else obs.shape[-1]
+        raise ValueError(
+            f"train.teacher={path!r} does not fit this env's teacher observation ({want} actor "
+            f"inputs; a teacher is trained with env.actor_terrain=True and the same sensor and "
+            f"critic layout as the student's config): {e}"
+        ) from None
+    return networks, params, normalizer
+
+
+def teacher_network_cfg(path: str, default):
+    """The teacher's c.network from its run config (config.json beside or above ``path``)."""
+    import ml_collections
+
+    from foottof.ppo import run_dir as run_dirs
+
+    config = run_dirs.run_config_path(path)
+    if config is None:
+        return default
+    with open(config) as f:
+        saved = json.load(f).get("network")
+    if not saved:
+        return default
+    out = ml_collections.ConfigDict(dict(default))
+    for k, v in saved.items():
+        if k in out:
+            out[k] = tuple(v) if isinstance(v, list) else v
+    return out
+
+
+def check_teacher_path(path: str) -> None:
+    if not os.path.exists(path):
+        raise FileNotFoundError(
+            f"train.teacher={path!r} does not exist; train a teacher first "
+            f"(python train.py --config configs/teacher_cpu.py) or pass --config.train.teacher=PATH"
+        )
+
+
+def make_distill_env(cfg):
+    """(batched TeacherEnv, init function) for a distillation run of the ToF env: the env is
+    built with env.actor_terrain on (the teacher's observation; ``cfg`` itself keeps the
+    student's layout, so its saved run config evaluates the student), the teacher loaded from
+    ``cfg.train.teacher``, and the init function cuts the student from the teacher
+    (:func:`student_from_teacher`; used where the run has no train.init_from)."""
+    from foottof.envs import make_training_env
+    from foottof.envs.anymal_tof import ACTOR_TERRAIN_INPUTS
+
+    path = str(cfg.train.teacher)
+    check_teacher_path(path)
+    if cfg.env.get("actor_terrain", False):
+        raise ValueError(
+            "env.actor_terrain=True in a distillation config: the config is the student's "
+            "(sensors only); the teacher's terrain inputs are added for it"
+        )
+    full = cfg.copy_and_resolve_references()
+    with full.unlocked():
+        full.env.actor_terrain = True
+    env = make_training_env(full)
+    teacher = load_teacher(path, env, teacher_network_cfg(path, cfg.network))
+    shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
+    student_obs_size = shape.obs[net.ACTOR_KEY].shape[-1] - ACTOR_TERRAIN_INPUTS
+    _, t_params, t_norm = teacher
+
+    def init(params, normalizer):
+        return student_from_teacher(params, normalizer, t_params, t_norm)
+
+    return TeacherEnv(env, teacher, student_obs_size), init

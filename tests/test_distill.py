@@ -1,0 +1,167 @@
+"""Distillation (foottof.ppo.distill) on the toy memory task: a teacher that sees the cue at every
+step, a student that must remember it; resume; export of the student."""
+
+import json
+
+import jax
+import jax.numpy as jp
+import numpy as np
+import pytest
+from helpers import small_cfg, tiny_cfg, tree_equal
+
+from foottof.ppo import distill, export, runner, toy_envs
+from foottof.ppo import train as train_lib
+
+EPISODE = 8  # steps; steps 1..7 are rewarded
+
+
+def _greedy_reward(env, networks, params, normalizer, key, n_envs=256, steps=4 * EPISODE):
+    """Mean reward per step of the deterministic policy (action means) over n_envs x steps."""
+    act = jax.jit(networks.policy_fn(params, normalizer, deterministic=True))
+    step = jax.jit(env.step)
+    state = jax.jit(env.reset)(jax.random.split(key, n_envs))
+    carry, reset, total = networks.init_carry(n_envs), jp.ones((n_envs,), bool), 0.0
+    for _ in range(steps):
+        carry, action = act(carry, state.obs, reset, None)
+        state = step(state, action)
+        reset = state.done.astype(bool)
+        total += float(jp.mean(state.reward))
+    return total / steps
+
+
+@pytest.fixture(scope="module")
+def teacher_and_student():
+    # Teacher: a memoryless MLP trained by PPO on the teacher view (it sees the cue every step).
+    tenv = toy_envs.make_memory_env(EPISODE, teacher=True)
+    ttrain = train_lib.make_train(tenv, small_cfg("mlp"))
+    tstate = ttrain.init(jax.random.PRNGKey(0))
+    for _ in range(30):
+        tstate, _ = ttrain.iteration(tstate)
+    teacher = (ttrain.networks, tstate.params, tstate.normalizer)
+    # Student: an LSTM reading the first 2 inputs (cue at t = 0 only), distilled by DAgger.
+    denv = distill.TeacherEnv(tenv, teacher, student_obs_size=2)
+    cfg = small_cfg("lstm", lr_schedule="fixed", learning_rate=3e-3)
+    cfg.train.teacher = "toy"
+    strain = train_lib.make_train(denv, cfg)
+    sstate = strain.init(jax.random.PRNGKey(1))
+    history = []
+    for _ in range(30):
+        sstate, m = strain.iteration(sstate)
+        history.append({k: float(v) for k, v in m.items()})
+    return tenv, denv, teacher, strain, sstate, history
+
+
+def test_distilled_student_reaches_its_teacher(teacher_and_student):
+    """Bound: the reward -|clip(a) - c| is 1-Lipschitz in a, so per rewarded step the student
+    loses at most |a_s - a_t| to its teacher, on average <= sqrt(E (a_s - a_t)^2) = sqrt(loss)
+    (Cauchy-Schwarz); the toy's observations do not depend on the actions, so the training
+    rollouts' imitation loss holds on the evaluation's states. With 7 of 8 steps rewarded:
+    r_student >= r_teacher - 7/8 sqrt(loss) (+ 0.02 for the evaluation's other cue draws)."""
+    tenv, denv, teacher, strain, sstate, history = teacher_and_student
+    key = jax.random.PRNGKey(11)
+    r_teacher = _greedy_reward(tenv, *teacher, key)
+    r_student = _greedy_reward(denv, strain.networks, sstate.params, sstate.normalizer, key)
+    loss = history[-1]["loss/imitation"]
+    assert r_teacher > -0.2, r_teacher  # the teacher solved its (memoryless) task
+    assert history[0]["loss/imitation"] > 10 * loss and loss < 0.01, (history[0], loss)
+    assert r_student >= r_teacher - 7 / 8 * np.sqrt(loss) - 0.02, (r_student, r_teacher, loss)
+    assert r_student > -0.3  # a memoryless student earns <= -7/8: the cue was remembered
+    for h in history:  # the trainer's guards and progress line see the distillation metrics
+        assert h["loss/policy"] == h["loss/imitation"] and h["ppo/kl"] == 0.0
+        assert h["ppo/params_finite"] == 1.0
+
+
+def test_teacher_env_shows_the_student_its_inputs_only(teacher_and_student):
+    tenv, denv, teacher, *_ = teacher_and_student
+    state = denv.reset(jax.random.split(jax.random.PRNGKey(2), 4))
+    full = tenv.reset(jax.random.split(jax.random.PRNGKey(2), 4)).obs
+    np.testing.assert_array_equal(state.obs["state"], full["state"][:, :2])
+    np.testing.assert_array_equal(state.obs[distill.TEACHER_OBS_KEY], full["state"])
+    nets, params, norm = teacher
+    _, mean, _, _ = nets.step(params, norm, (), full, jp.ones((4,), bool))
+    np.testing.assert_allclose(state.obs[distill.TEACHER_ACTION_KEY], mean, rtol=1e-6)
+    # the wrapped env steps like the plain one (same cues, rewards, dones)
+    a = jp.ones((4, 1))
+    np.testing.assert_array_equal(
+        denv.step(state, a).reward,
+        tenv.step(tenv.reset(jax.random.split(jax.random.PRNGKey(2), 4)), a).reward,
+    )
+
+
+def test_student_cut_from_teacher_acts_as_teacher_without_its_extra_inputs():
+    """student_from_teacher: an LSTM student of the teacher's size starts as the teacher with
+    the extra inputs' weights dropped, so on observations whose extra inputs are at their
+    normalizer mean (normalized to 0) both act alike; an MLP teacher gives None."""
+    tenv = toy_envs.make_memory_env(EPISODE, teacher=True)
+    cfg = small_cfg("lstm")
+    ttrain = train_lib.make_train(tenv, cfg)
+    tstate = ttrain.init(jax.random.PRNGKey(0))
+    tstate, _ = ttrain.iteration(tstate)
+    denv = distill.TeacherEnv(tenv, (ttrain.networks, tstate.params, tstate.normalizer), 2)
+    strain = train_lib.make_train(denv, cfg)
+    s0 = strain.init(jax.random.PRNGKey(1))
+    params, norm = distill.student_from_teacher(
+        s0.params, s0.normalizer, tstate.params, tstate.normalizer
+    )
+    obs = {"state": jp.array([[0.5, 1.0]]), "privileged_state": jp.array([[0.5, 1.0, 0.3]])}
+    full = dict(obs, state=jp.array([[0.5, 1.0, float(tstate.normalizer.mean["state"][2])]]))
+    reset = jp.ones((1,), bool)
+    _, m_s, _, v_s = strain.networks.step(params, norm, strain.networks.init_carry(1), obs, reset)
+    _, m_t, _, v_t = ttrain.networks.step(
+        tstate.params, tstate.normalizer, ttrain.networks.init_carry(1), full, reset
+    )
+    np.testing.assert_allclose(m_s, m_t, rtol=1e-5, atol=1e-6)
+    np.testing.assert_allclose(v_s, v_t, rtol=1e-5, atol=1e-6)  # the critic is the teacher's
+    mlp = train_lib.make_train(tenv, small_cfg("mlp")).init(jax.random.PRNGKey(0))
+    assert (
+        distill.student_from_teacher(s0.params, s0.normalizer, mlp.params, mlp.normalizer) is None
+    )
+
+
+def test_distillation_resume_is_bit_exact(teacher_and_student, tmp_path):
+    tenv, _, teacher, *_ = teacher_and_student
+    denv = distill.TeacherEnv(tenv, teacher, student_obs_size=2)
+
+    def cfg(n):
+        c = tiny_cfg(num_iterations=n, teacher="toy")
+        c.ppo.lr_schedule = "fixed"
+        return c
+
+    straight = runner.run(cfg(4), denv, str(tmp_path / "a"))
+    runner.run(cfg(2), denv, str(tmp_path / "b"))
+    resumed = runner.run(cfg(4), denv, str(tmp_path / "b"), resume=True)
+    assert int(resumed.iteration) == 4
+    assert tree_equal(jax.device_get(straight), jax.device_get(resumed))  # teacher carry too
+    assert distill.TEACHER_CARRY_KEY in resumed.env_state.info
+    header = (tmp_path / "b" / "metrics.csv").read_text().splitlines()[0]
+    assert "loss/imitation" in header
+    assert json.loads((tmp_path / "b" / "config.json").read_text())["train"]["teacher"] == "toy"
+
+
+def test_student_export_equals_its_jax_actor(teacher_and_student, tmp_path):
+    """The distilled student is an ordinary policy: its NumPy export reads the student's inputs
+    and acts as the JAX actor over two episodes."""
+    _, denv, _, strain, sstate, _ = teacher_and_student
+    nets = strain.networks
+    path = export.export_policy(str(tmp_path / "student"), nets, sstate.params, sstate.normalizer)
+    policy = export.NumpyPolicy(path)
+    act = jax.jit(nets.policy_fn(sstate.params, sstate.normalizer, deterministic=True))
+    state = denv.reset(jax.random.PRNGKey(5)[None])
+    carry, reset = nets.init_carry(1), jp.ones((1,), bool)
+    for _ in range(2 * EPISODE):
+        carry, action = act(carry, state.obs, reset, None)
+        if bool(reset[0]):
+            policy.reset()
+        np.testing.assert_allclose(policy(np.asarray(state.obs["state"][0])), action[0], atol=1e-5)
+        state = denv.step(state, action)
+        reset = state.done.astype(bool)
+
+
+def test_teacher_of_another_layout_is_one_clear_error(tmp_path):
+    """A teacher trained without the privileged inputs (2 actor inputs) for an env that gives 3."""
+    tenv = toy_envs.make_memory_env(EPISODE, privileged=True)  # actor: 2 inputs
+    runner.run(tiny_cfg(num_iterations=1), tenv, str(tmp_path / "t"))
+    with pytest.raises(ValueError, match=r"train.teacher=.*does not fit.*3 actor inputs"):
+        distill.load_teacher(
+            str(tmp_path / "t"), toy_envs.make_memory_env(EPISODE, teacher=True), tiny_cfg().network
+        )

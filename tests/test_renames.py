@@ -201,6 +201,7 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     assert float(terms(new)["foot_clearance"]) > 0.0
     for name, value in terms(old).items():
         assert jp.allclose(value, terms(new)[name]), name
+
     # ... and scale alike: an absent added term (reward.scales.task) scales to its default, off
     def scaled(c):
         overall = c.reward.get("overall_scale", renames.added_default("reward.overall_scale"))

@@ -61,5 +61,5 @@ def test_bad_input_names_the_problem(tmp_path):
         compare.compare([("x", str(tmp_path / "missing"))], 1, 5)
     assert compare.parse_branch("runs/stage1_cap25/") == ("stage1_cap25", "runs/stage1_cap25/")
     assert compare.parse_branch("cap=runs/x") == ("cap", "runs/x")
-    with pytest.raises(ValueError, match=r"expected NAME=RUN_DIR"):
+    with pytest.raises(ValueError, match=r"expected NAME=DIR"):
         compare.parse_branch("=runs/x")

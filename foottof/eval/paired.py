@@ -30,7 +30,6 @@ import os
 
 from foottof import renames
 from foottof.eval import results
-from foottof.lab.compare import parse_branch  # NAME=DIR, as the A/B tool of training runs
 
 PAIRED_KEYS = (  # CSV columns of --out
     "source",
@@ -45,6 +44,17 @@ PAIRED_KEYS = (  # CSV columns of --out
     "falls_a",
     "falls_b",
 )
+
+
+def parse_branch(arg: str) -> tuple[str, str]:
+    """``NAME=DIR`` -> (name, dir); a bare ``DIR`` is named by its base name (the paired tool's
+    folders and the A/B tool's run directories, foottof.lab.compare, which sits above eval/)."""
+    name, sep, path = arg.partition("=")
+    if not sep:
+        name, path = os.path.basename(os.path.normpath(arg)), arg
+    if not name or not path:
+        raise ValueError(f"branch {arg!r}: expected NAME=DIR")
+    return name, path
 
 
 def mcnemar_exact(a_only: int, b_only: int) -> float:

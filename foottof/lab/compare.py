@@ -18,6 +18,7 @@ import os
 
 import numpy as np
 
+from foottof.eval.paired import parse_branch  # noqa: F401 (NAME=RUN_DIR, re-exported)
 from foottof.lab.curves import read_metrics
 
 # (metrics.csv column, table header). Per-episode columns are means over the episodes that ended
@@ -32,16 +33,6 @@ COLUMNS = (
     ("train/episode_return", "return"),
     ("ppo/action_std", "action std"),
 )
-
-
-def parse_branch(arg: str) -> tuple[str, str]:
-    """``NAME=RUN_DIR`` -> (name, run_dir); a bare ``RUN_DIR`` is named by its base name."""
-    name, sep, path = arg.partition("=")
-    if not sep:
-        name, path = os.path.basename(os.path.normpath(arg)), arg
-    if not name or not path:
-        raise ValueError(f"branch {arg!r}: expected NAME=RUN_DIR")
-    return name, path
 
 
 def window_rows(metrics: dict[str, np.ndarray], first: int, last: int) -> dict[str, np.ndarray]:

@@ -552,6 +552,82 @@ def test_unknown_cells_give_no_return(straight_walk):
     np.testing.assert_array_equal(r.distance_m, TOF.max_range_m)
 
 
+LEVEL = jp.array([1.0, 0.0, 0.0, 0.0], jp.float32)  # level base orientation (w, x, y, z)
+
+
+def _flat_hf(z: float) -> Heightfield:
+    """Flat world terrain at height z [m] (the tile geometry)."""
+    return _tile_hf(np.full((SPEC.ny, SPEC.nx), z, np.float32))
+
+
+def test_mock_sensor_below_flat_surface_reads_contact():
+    """Issue 52: with a shorter real shank, nominal kinematics put the believed sensor below the
+    ground the real foot stands on. Both mocks then read contact (0 m, valid, incidence 0 in every
+    zone), not 'no ground' (max range, invalid: rays from inside the solid pass through it).
+    With the ground 3 cm below the believed sensors the readings stay tof.sense's."""
+    q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
+    sites, rots = sources.sensor_sites_in_scan_frame(LEVEL, q)
+    site_z = float(sites[0, 2])
+    np.testing.assert_allclose(sites[:, 2], site_z, atol=1e-6)  # DEFAULT_POSE: all 4 level
+    hf = _flat_hf(0.0)
+    for ground_over_site, contact in ((0.02, True), (-0.03, False)):
+        pos = jp.array([2.0, 2.0, -(site_z + ground_over_site)], jp.float32)  # ground at z = 0
+        state = em.aggre_init(hf, pos, LEVEL, see_all=True)
+        for r in _aggre_and_ideal(state, hf, pos, LEVEL, q):
+            if contact:
+                np.testing.assert_array_equal(r.distance_m, 0.0)
+                assert bool(np.asarray(r.valid).all())
+                np.testing.assert_array_equal(r.incidence_rad, 0.0)
+            else:
+                scan = jp.full((em.SCAN_N, em.SCAN_N), -float(pos[2]), jp.float32)
+                ref = tof.sense(TOF, em.scan_heightfield(scan), sites, rots)
+                assert bool(np.asarray(ref.valid).all())
+                np.testing.assert_allclose(r.distance_m, ref.distance_m, atol=1.0e-3 + 1e-6)
+                np.testing.assert_array_equal(r.valid, ref.valid)
+
+
+def test_mock_sensors_at_a_gap_edge_hand_computed():
+    """Four straight-down sensors 2 cm below a stone top (z = -0.50) at y = 0, the stone ending
+    at x = 0 and a gap floor at z = -0.80 from x = 0.05 (the 5 cm scan cell between is the ramp
+    z = -0.5 - 6 x of the triangulated scan; the edge runs along y, so both triangles agree).
+    Sensor z = -0.52; sensor +x = world +x, so zone rows 0-1 look back at the stone.
+
+    (a) x = -0.02 over the stone: below the surface -> contact (0 m, valid) in every zone.
+    (b) x = +0.002 on the ramp: surface -0.512 there, still 8 mm above -> contact.
+    (c) x = +0.004 on the ramp: surface -0.524, 4 mm below -> no contact; the rays hit the ramp
+        (and forward rays the floor). A ray (tx, ty, -1) hits the ramp at depth
+        u = 0.004 / (1 - 6 tx) (tx < 1/6), range u sqrt(1 + tx^2 + ty^2), smallest at the zone's
+        tx nearest -t (t = tan 22.5 deg = 0.4142) and |ty| nearest 0:
+        row 0 (tx = -t): 0.004 * 1.0824 / 3.485 = 0.0012 -> 1 mm (|ty| = t/2: 0.0013 -> 1 mm);
+        row 1 (tx = -t/2): 0.004 * 1.0212 / 2.243 = 0.0018 -> 2 mm (0.0019 -> 2 mm);
+        row 2: its tx = 0 corners hit the ramp straight below: 4 mm (0.004 * 1.0212 -> 4 mm);
+        row 3 (tx >= t/2 > 1/6: the ramp falls away faster than the ray) hits the floor 0.28 m
+        below: 0.28 * sqrt(1 + (t/2)^2) = 0.2859 -> 0.286 (outer columns 0.28 * 1.0420 -> 0.292).
+    (d) x = +0.30 over the gap: below the stone top but outside the solid, not in contact; all
+        rays hit the floor 0.28 m below (back rays reach x >= 0.30 - 0.28 t = 0.18 > 0.05):
+        0.28 sqrt(1 + tx_min^2 + ty_min^2) = 0.280 / 0.286 / 0.292 m by the zone's nearest corner.
+    """
+    xs = np.asarray(em.scan_xy())[0, :, 0]  # vertex x along a row [m]
+    scan = np.where(xs[None, :] <= 1e-6, -0.50, -0.80) * np.ones((em.SCAN_N, 1))
+    hf = em.scan_heightfield(jp.asarray(scan, jp.float32))
+    pos = jp.array([[-0.02, 0, -0.52], [0.002, 0, -0.52], [0.004, 0, -0.52], [0.30, 0, -0.52]])
+    down = jp.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]]).T  # columns: site x, y, z axes
+    r = jax.jit(lambda p, rot: sources.sense_mapped(TOF, hf, p, rot))(
+        pos, jp.broadcast_to(down, (4, 3, 3))
+    )
+    dist, valid = np.asarray(r.distance_m).reshape(4, 4, 4), np.asarray(r.valid)
+    assert valid.all()
+    np.testing.assert_array_equal(dist[:2], 0.0)  # (a), (b): contact
+    np.testing.assert_array_equal(r.incidence_rad[:2], 0.0)
+    ramp = [[1, 1, 1, 1], [2, 2, 2, 2], [4, 4, 4, 4], [292, 286, 286, 292]]  # (c) [mm]
+    floor = [[292, 286, 286, 292], [286, 280, 280, 286], [286, 280, 280, 286], [292, 286, 286, 292]]
+    np.testing.assert_allclose(dist[2], np.asarray(ramp) / 1000.0, atol=1e-6)
+    np.testing.assert_allclose(dist[3], np.asarray(floor) / 1000.0, atol=1e-6)
+    ref = tof.sense(TOF, hf, pos, jp.broadcast_to(down, (4, 3, 3)))  # (c), (d): tof's pipeline
+    np.testing.assert_array_equal(r.distance_m[2:], ref.distance_m[2:])
+    np.testing.assert_allclose(r.incidence_rad[2:], ref.incidence_rad[2:], atol=1e-6)  # jit/eager
+
+
 def test_jit_equals_no_jit(stones_hf):
     """Scan, sensor poses and map update: eager == jit (the ray caster's own jit == no-jit is
     tested with foottof.sensors)."""

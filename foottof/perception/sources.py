@@ -49,6 +49,42 @@ def sensor_sites_in_scan_frame(
     return pos, rot
 
 
+def sense_mapped(
+    spec: tof.ToFSpec, hfield: Heightfield, site_pos: jax.Array, site_rot: jax.Array
+) -> tof.ToFReading:
+    """Emulated foot frame on a mapped surface: :func:`foottof.sensors.tof.sense`, plus contact.
+
+    The emulated sensors sit where nominal kinematics of the measured joints put them, which can
+    be inside the mapped solid (e.g. a shorter real shank: the believed foot lies below the ground
+    the real foot stands on). A ray starting inside the solid passes through it, as ``mj_ray``
+    does, so ``tof.sense`` would read no ground (max range, invalid) under a foot that stands.
+    Contact rule: a sensor whose origin (site + ``spec.offset_m``) lies strictly below the
+    surface at its xy (:meth:`Heightfield.height_at`, the triangulation the rays hit) reads the
+    distance to the surface clipped at zero in every zone: 0 m, valid, incidence 0 (no hit point;
+    the spec has no minimum range, and ``degradation.degrade`` clips negative readings to a
+    valid 0 m the same way). Sensors on or above the surface read exactly ``tof.sense``.
+
+    Args:
+      spec: ToF sensor spec (static).
+      hfield: the mapped surface (e.g. ``elevation_map.scan_heightfield(scan)``).
+      site_pos: (F, 3) sensor site positions in the surface's frame [m].
+      site_rot: (F, 3, 3) site axes as columns.
+
+    Returns:
+      ToFReading with (F, Z) distance_m, valid and incidence_rad.
+    """
+    reading = tof.sense(spec, hfield, site_pos, site_rot)
+    origin, _ = tof.sensor_frames(spec, site_pos, site_rot)
+    contact = (origin[:, 2] < hfield.height_at(origin[:, :2]))[:, None]  # (F, 1) inside solid
+    return tof.ToFReading(
+        distance_m=jp.where(contact, 0.0, reading.distance_m).astype(reading.distance_m.dtype),
+        valid=reading.valid | contact,
+        incidence_rad=jp.where(contact, 0.0, reading.incidence_rad).astype(
+            reading.incidence_rad.dtype
+        ),
+    )
+
+
 def readings_from_scan(
     spec: tof.ToFSpec,
     scan: jax.Array,
@@ -61,8 +97,10 @@ def readings_from_scan(
     Uses exactly the ``tof`` source's pipeline (:func:`foottof.sensors.tof.sense`: the same 41
     rays per sensor, zone minimum, quantization and clipping, extra tilts and offsets of ``spec``)
     on ``scan`` wrapped as a Heightfield (elevation_map.scan_heightfield); only the surface and
-    the sensor poses differ. Cells the map has never seen hold UNKNOWN_HEIGHT_M (4 m below the
-    base), so rays over them get no return: distance = max range, valid = False.
+    the sensor poses differ, plus the contact rule of :func:`sense_mapped` (a believed sensor
+    below the mapped surface reads 0 m, valid). Cells the map has never seen hold
+    UNKNOWN_HEIGHT_M (4 m below the base), so rays over them get no return: distance = max
+    range, valid = False.
 
     Args:
       spec: ToF sensor spec (static).
@@ -76,7 +114,7 @@ def readings_from_scan(
     """
     feet = _check_sensor_feet(spec, sensor_feet)
     pos, rot = sensor_sites_in_scan_frame(base_quat, q_measured, feet)
-    return tof.sense(spec, em.scan_heightfield(scan), pos, rot)
+    return sense_mapped(spec, em.scan_heightfield(scan), pos, rot)
 
 
 def mock_ideal_readings(

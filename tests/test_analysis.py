@@ -7,6 +7,7 @@ decoder of the written video (imageio/ffmpeg).
 """
 
 import os
+import warnings
 
 import imageio.v2 as imageio
 import jax
@@ -180,6 +181,23 @@ def test_write_analysis_outputs(episode, tmp_path):
     assert analysis.write_analysis(env, trace, str(tmp_path / "n"), "x", "none")[-1].endswith(
         "episode_x.npz"
     )
+
+
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")  # the oracle (imageio's reader) forks
+def test_mp4_encoder_starts_without_forking_jax(tmp_path):
+    """With JAX's backend up, writing an MP4 starts ffmpeg without an os.fork of this process
+    (JAX warns "os.fork() was called" from its at-fork hook, which only a fork runs), and the
+    frames come back from the decoder."""
+    jp.zeros(()).block_until_ready()  # JAX's backend (and its at-fork hook) up
+    frames = np.zeros((3, 16, 32, 3), np.uint8)
+    frames[1, :, 16:] = 255  # frame 1: right half white
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        path = video.write_video(str(tmp_path / "a.mp4"), frames, 10.0)
+    assert [str(w.message) for w in caught if "fork" in str(w.message)] == []
+    back = np.array(imageio.mimread(path))
+    assert back.shape == frames.shape
+    np.testing.assert_allclose(back, frames, atol=8)  # H.264 at CRF 15: near-lossless on flats
 
 
 def test_bad_video_inputs(episode, tmp_path):

@@ -11,6 +11,8 @@ from __future__ import annotations
 import copy
 import ctypes.util
 import os
+import subprocess
+from fractions import Fraction
 
 import numpy as np
 
@@ -238,16 +240,7 @@ def write_video(path: str, frames: np.ndarray, fps: float) -> str:
     tmp = f"{path[: -len(ext) - 1]}.partial.{ext}"
     try:
         if ext == "mp4":
-            with imageio.get_writer(
-                tmp,
-                fps=fps,
-                codec="libx264",
-                quality=7,
-                macro_block_size=1,
-                ffmpeg_log_level="error",
-            ) as w:
-                for f in frames:
-                    w.append_data(f)
+            _write_mp4(tmp, frames, fps)
         else:
             imageio.mimsave(tmp, list(frames), duration=1000.0 / fps, loop=0)
         os.replace(tmp, path)
@@ -255,3 +248,34 @@ def write_video(path: str, frames: np.ndarray, fps: float) -> str:
         if os.path.exists(tmp):
             os.remove(tmp)
     return path
+
+
+def _write_mp4(path: str, frames: np.ndarray, fps: float) -> None:
+    """Pipes frames (N, H, W, 3) uint8 into imageio-ffmpeg's ffmpeg: H.264, CRF 15, yuv420p.
+
+    The command is the one ``imageio.get_writer(codec="libx264", quality=7, macro_block_size=1)``
+    runs (the same bytes out), but started with ``process_group=0`` instead of its
+    ``preexec_fn=os.setpgrp``: a preexec_fn makes Python fork the interpreter, which JAX warns
+    "os.fork() was called ... deadlock" about; without one the child is vfork'ed and exec'ed at
+    once, in its own process group still (so Ctrl-C reaches Python, which closes the pipe).
+    """
+    import imageio_ffmpeg
+
+    _, h, w, _ = frames.shape
+    cmd = [
+        imageio_ffmpeg.get_ffmpeg_exe(),
+        "-y",
+        *("-f", "rawvideo", "-vcodec", "rawvideo", "-s", f"{w}x{h}", "-pix_fmt", "rgb24"),
+        *("-r", str(Fraction(fps).limit_denominator()), "-i", "-", "-an"),
+        *("-vcodec", "libx264", "-pix_fmt", "yuv420p", "-crf", "15", "-v", "error", path),
+    ]
+    with subprocess.Popen(
+        cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, process_group=0
+    ) as p:  # on exit: closes stdin (ffmpeg finishes the file) and waits
+        try:
+            for f in frames:
+                p.stdin.write(np.ascontiguousarray(f).tobytes())
+        except BrokenPipeError:
+            pass  # ffmpeg stopped early; its exit status below says so
+    if p.returncode:
+        raise RuntimeError(f"ffmpeg exited with status {p.returncode} writing {path!r}")

@@ -301,7 +301,7 @@ def test_bad_name_and_difficulty_raise():
             generate_tile("beam", key, bad)
     with pytest.raises(ValueError, match="cell_m"):
         TileSpec(cell_m=0.05)
-    with pytest.raises(ValueError, match="multiple of cell_m"):
+    with pytest.raises(ValueError, match=r"multiple of terrain\.cell_m"):
         TileSpec(platform_length_m=1.5)
 
 

@@ -7,13 +7,13 @@ import subprocess
 import sys
 
 import pytest
+from helpers import REPO
 
 from configs import load_config
 from foottof import config_check as cc
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG_FILES = sorted(
-    p for p in glob.glob(os.path.join(ROOT, "configs", "*.py")) if not os.path.basename(p)[0] == "_"
+    p for p in glob.glob(os.path.join(REPO, "configs", "*.py")) if not os.path.basename(p)[0] == "_"
 )
 
 
@@ -70,7 +70,7 @@ BAD = [
 
 @pytest.mark.parametrize("field,value,words", BAD, ids=[f"{f}={v}" for f, v, _ in BAD])
 def test_bad_value_is_one_line_naming_field_value_and_range(field, value, words):
-    cfg = load_config(os.path.join(ROOT, "configs", "cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "cpu.py"))
     _set(cfg, field, value)
     with pytest.raises(cc.ConfigError) as e:
         cc.check_config(cfg)
@@ -81,7 +81,7 @@ def test_bad_value_is_one_line_naming_field_value_and_range(field, value, words)
 
 
 def test_missing_section_is_an_error():
-    cfg = load_config(os.path.join(ROOT, "configs", "cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "cpu.py"))
     del cfg["eval"]
     with pytest.raises(cc.ConfigError, match="'eval'"):
         cc.check_config(cfg)
@@ -89,7 +89,7 @@ def test_missing_section_is_an_error():
 
 def test_every_rule_names_a_field_of_the_base_config():
     """A renamed or dropped field must not leave a rule that silently never runs."""
-    cfg = load_config(os.path.join(ROOT, "configs", "base.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "base.py"))
     dead = [p for p in cc.RULES if not cc._items(cfg, p)]
     assert not dead, dead
 
@@ -126,7 +126,7 @@ def test_a_tof_rule_lives_once(field, value):
     built in code: both run config_check's rule (no second copy in foottof.sensors.tof)."""
     from foottof.sensors import tof
 
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     cfg.sensor[field] = value
     with pytest.raises(cc.ConfigError) as from_config:
         cc.check_config(cfg)
@@ -143,7 +143,7 @@ def test_a_noise_stage_rule_lives_once(field, value):
     """Likewise for noise.stage*: DegradationBounds.from_config runs config_check's rules."""
     from foottof.sensors.degradation import DegradationBounds
 
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     cfg.noise.stage2[field] = value
     with pytest.raises(cc.ConfigError) as from_config:
         cc.check_config(cfg)
@@ -155,7 +155,7 @@ def test_a_noise_stage_rule_lives_once(field, value):
 
 def _config_error(field, value) -> str:
     """The one line check_config gives for the stage-1 CPU config with ``field`` set to ``value``."""
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     _set(cfg, field, value)
     with pytest.raises(cc.ConfigError) as e:
         cc.check_config(cfg)
@@ -187,7 +187,7 @@ def test_a_tile_rule_lives_once(spec_field, field, value):
     built in code: both run config_check's rule (no second copy in foottof.terrain.tiles)."""
     from foottof.terrain.tiles import TileSpec
 
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     assert TileSpec.from_config(cfg.terrain) == TileSpec()  # the config's tile is the default
     with pytest.raises(ValueError) as from_spec:
         TileSpec(**{spec_field: value})
@@ -219,7 +219,7 @@ def test_a_model_rule_lives_once(field, value):
     shank_scale rule): no second copy in foottof.robot."""
     from foottof.robot import kinematics, model
 
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     line = _config_error(f"env.model.{field}", value)
     with pytest.raises(ValueError) as from_model:
         model.make_model(**{**cfg.env.model, field: value})
@@ -237,6 +237,6 @@ def test_check_imports_no_jax():
         "config_check.check_config(load_config('configs/cpu.py'));"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'mujoco')))"
     )
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]", r.stdout

@@ -9,6 +9,7 @@ import ml_collections
 from foottof.constants import CONTROL_DT_S  # noqa: F401 (imports no JAX)
 from foottof.limits import (  # the one home of allowed values (imports no JAX)
     ACTIVATIONS,
+    FOOT_RADIUS_RANGE_M,
     LEVEL_RANGES,
     LR_SCHEDULES,
     MAX_CELL_M,
@@ -194,7 +195,7 @@ RULES = {
     **{f"noise.stage{s}.{k}": c for s in (1, 2) for k, c in _STAGE_NOISE.items()},
     # env: robot model and PD control
     "env.model.shank_scale": _num(*LEVEL_RANGES["shank_length"]),
-    "env.model.foot_radius_m": _num(0.02, 0.05),
+    "env.model.foot_radius_m": _num(*FOOT_RADIUS_RANGE_M),
     "env.model.armature": _nonneg,
     "env.model.joint_damping": _nonneg,
     "env.model.foot_friction": _nonneg,
@@ -402,9 +403,49 @@ def _check_noise_stage_cross(n, prefix: str) -> None:
         )
 
 
+def _check_tile_cross(t) -> None:
+    """Checks between the tile geometry fields of c.terrain (whole cells, course length, height
+    range); foottof.terrain.tiles.TileSpec runs them too."""
+    for name in ("tile_length_m", "tile_width_m", "platform_length_m", "goal_length_m"):
+        cells = t[name] / t.cell_m
+        if abs(cells - round(cells)) > 1e-6:
+            _fail(f"terrain.{name}", t[name], f"must be a multiple of terrain.cell_m={t.cell_m:g}")
+    if t.platform_length_m + t.goal_length_m > t.tile_length_m - 1.0:
+        _fail(
+            "terrain.tile_length_m",
+            t.tile_length_m,
+            f"must be >= platform_length_m + goal_length_m + 1 m of course = "
+            f"{t.platform_length_m + t.goal_length_m + 1.0:g}",
+        )
+    if t.pit_z_m + t.z_range_m < 1.0:
+        _fail("terrain.z_range_m", t.z_range_m, f"must be >= 1 - pit_z_m = {1.0 - t.pit_z_m:g}")
+
+
+def _check_model_cross(m) -> None:
+    """Checks between fields of c.env.model (contact time constant vs the physics step);
+    foottof.robot.model runs them too."""
+    if m.solref_timeconst < 2 * m.timestep:
+        _fail(
+            "env.model.solref_timeconst",
+            m.solref_timeconst,
+            f"must be >= 2 * env.model.timestep = {2 * m.timestep:g}",
+        )
+
+
 # Cross-field checks of one section by its path, with the fields they read (check_fields runs
 # them after the RULES when it is given all of those fields).
+_TILE_FIELDS = (
+    "tile_length_m",
+    "tile_width_m",
+    "cell_m",
+    "platform_length_m",
+    "goal_length_m",
+    "pit_z_m",
+    "z_range_m",
+)
 _SECTION_CROSS = {
+    "terrain": (_TILE_FIELDS, _check_tile_cross),
+    "env.model": (("timestep", "solref_timeconst"), _check_model_cross),
     "sensor": (("grid", "rate_hz", "max_range_m", "resolution_m"), _check_sensor_cross),
     **{
         f"noise.stage{s}": (
@@ -421,8 +462,9 @@ def check_fields(section: str, values) -> None:
     mapping or ConfigDict of that section, e.g. section 'sensor' or 'noise.stage1').
 
     The specs built from a config section (foottof.sensors.tof.ToFSpec,
-    foottof.sensors.degradation.DegradationBounds) check their fields with it, so each rule lives
-    once, here, whether a spec comes from a config or is built in code.
+    foottof.sensors.degradation.DegradationBounds, foottof.terrain.tiles.TileSpec, the robot
+    model of foottof.robot.model and its kinematics) check their fields with it, so each rule
+    lives once, here, whether a spec comes from a config or is built in code.
 
     Raises:
       ConfigError (a ValueError): '<section>.<field>=<value>: <valid range>'.
@@ -461,19 +503,7 @@ def _check_cross(c) -> None:
                 f"needs a (low, high) range for {missing}",
             )
         _check_noise_stage_cross(c.noise[f"stage{s}"], f"noise.stage{s}")
-    for name in ("tile_length_m", "tile_width_m", "platform_length_m", "goal_length_m"):
-        cells = t[name] / t.cell_m
-        if abs(cells - round(cells)) > 1e-6:
-            _fail(f"terrain.{name}", t[name], f"must be a multiple of terrain.cell_m={t.cell_m:g}")
-    if t.platform_length_m + t.goal_length_m > t.tile_length_m - 1.0:
-        _fail(
-            "terrain.tile_length_m",
-            t.tile_length_m,
-            f"must be >= platform_length_m + goal_length_m + 1 m of course = "
-            f"{t.platform_length_m + t.goal_length_m + 1.0:g}",
-        )
-    if t.pit_z_m + t.z_range_m < 1.0:
-        _fail("terrain.z_range_m", t.z_range_m, f"must be >= 1 - pit_z_m = {1.0 - t.pit_z_m:g}")
+    _check_tile_cross(t)
     s = c.sensor
     n_sensors = len(s.sites)
     for name, width in (("tilt_x_deg", None), ("tilt_y_deg", None), ("offset_m", 3)):
@@ -507,12 +537,7 @@ def _check_cross(c) -> None:
             m.timestep,
             f"must divide the control period {CONTROL_DT_S:g} s into whole physics steps",
         )
-    if m.solref_timeconst < 2 * m.timestep:
-        _fail(
-            "env.model.solref_timeconst",
-            m.solref_timeconst,
-            f"must be >= 2 * env.model.timestep = {2 * m.timestep:g}",
-        )
+    _check_model_cross(m)
     sat = c.env.control.get("saturation_torque")
     if sat is not None and _num(0.0, lo_open=True)(sat):
         _fail("env.control.saturation_torque", sat, "must be None or a number > 0")

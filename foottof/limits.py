@@ -14,7 +14,10 @@ TOF_MAX_RATE_HZ = {4: 60.0, 8: 15.0}
 TILT_LIMIT_DEG = 90.0
 # Terrain (foottof.terrain.tiles): heightfield vertex spacing bound [m].
 MAX_CELL_M = 0.04
-# Evaluation (foottof.eval.robustness): valid closed range of each perturbation's levels.
+# Robot (foottof.robot.model; the tiles draw cracks for the same foot): foot sphere radius [m].
+FOOT_RADIUS_RANGE_M = (0.02, 0.05)
+# Evaluation (foottof.eval.robustness): valid closed range of each perturbation's levels; the
+# shank_length range is also the robot model's valid shank_scale (foottof.robot.kinematics).
 LEVEL_RANGES = {
     "none": (0.0, 0.0),
     "joint_offset": (0.0, 0.3),

@@ -7,6 +7,7 @@ decoder of the written video (imageio/ffmpeg).
 """
 
 import os
+import warnings
 
 import imageio.v2 as imageio
 import jax
@@ -180,6 +181,50 @@ def test_write_analysis_outputs(episode, tmp_path):
     assert analysis.write_analysis(env, trace, str(tmp_path / "n"), "x", "none")[-1].endswith(
         "episode_x.npz"
     )
+
+
+def test_terrain_is_coloured_by_height_where_it_lies():
+    """A 2 m x 2 m heightfield at z = 0 with a 0.8 m deep pit in its low-y, high-x quarter, seen
+    from straight above (image up = +y, right = +x): the pit's quarter of the frame is dark and
+    the other three are light (a texture flipped in x or y, or none, fails)."""
+    n, cell = 51, 0.04  # vertices per side, spacing [m]
+    z = np.zeros((n, n))  # rows along +y, columns along +x
+    z[: n // 2, n // 2 + 1 :] = -0.8
+    r_m = (n - 1) * cell / 2
+    m = mujoco.MjModel.from_xml_string(
+        f"""<mujoco><asset><hfield name="terrain" nrow="{n}" ncol="{n}" size="{r_m} {r_m} 2 0.1"/>
+        </asset><worldbody><light pos="0 0 5" dir="0 0 -1" directional="true"/>
+        <geom name="terrain" type="hfield" hfield="terrain" pos="0 0 -1"/>
+        <body pos="0 0 3"><freejoint/><geom size="0.01"/></body></worldbody></mujoco>"""
+    )
+    m.hfield_data[:] = ((z + 1.0) / 2.0).ravel()
+    with video.RolloutRenderer(m, 240, 240, 2.6, 90.0, -90.0) as r:
+        img = r.render(np.array([0.0, 0.0, 0.0, 1, 0, 0, 0])).mean(-1)
+    q = 50  # a 50 px square inside each quarter, clear of the pit walls and the frame edge
+    quarter = {
+        (row, col): img[sr : sr + q, sc : sc + q].mean()
+        for row, sr in (("high_y", 50), ("low_y", 240 - 50 - q))
+        for col, sc in (("low_x", 50), ("high_x", 240 - 50 - q))
+    }
+    dark = quarter.pop(("low_y", "high_x"))
+    assert dark < 60 and min(quarter.values()) > 2.5 * dark, (dark, quarter)
+
+
+@pytest.mark.filterwarnings("ignore:os.fork:RuntimeWarning")  # the oracle (imageio's reader) forks
+def test_mp4_encoder_starts_without_forking_jax(tmp_path):
+    """With JAX's backend up, writing an MP4 starts ffmpeg without an os.fork of this process
+    (JAX warns "os.fork() was called" from its at-fork hook, which only a fork runs), and the
+    frames come back from the decoder."""
+    jp.zeros(()).block_until_ready()  # JAX's backend (and its at-fork hook) up
+    frames = np.zeros((3, 16, 32, 3), np.uint8)
+    frames[1, :, 16:] = 255  # frame 1: right half white
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        path = video.write_video(str(tmp_path / "a.mp4"), frames, 10.0)
+    assert [str(w.message) for w in caught if "fork" in str(w.message)] == []
+    back = np.array(imageio.mimread(path))
+    assert back.shape == frames.shape
+    np.testing.assert_allclose(back, frames, atol=8)  # H.264 at CRF 15: near-lossless on flats
 
 
 def test_bad_video_inputs(episode, tmp_path):

@@ -7,13 +7,13 @@ import subprocess
 import sys
 
 import pytest
+from helpers import REPO
 
 from configs import load_config
 from foottof import config_check as cc
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 CONFIG_FILES = sorted(
-    p for p in glob.glob(os.path.join(ROOT, "configs", "*.py")) if not os.path.basename(p)[0] == "_"
+    p for p in glob.glob(os.path.join(REPO, "configs", "*.py")) if not os.path.basename(p)[0] == "_"
 )
 
 
@@ -70,7 +70,7 @@ BAD = [
 
 @pytest.mark.parametrize("field,value,words", BAD, ids=[f"{f}={v}" for f, v, _ in BAD])
 def test_bad_value_is_one_line_naming_field_value_and_range(field, value, words):
-    cfg = load_config(os.path.join(ROOT, "configs", "cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "cpu.py"))
     _set(cfg, field, value)
     with pytest.raises(cc.ConfigError) as e:
         cc.check_config(cfg)
@@ -81,7 +81,7 @@ def test_bad_value_is_one_line_naming_field_value_and_range(field, value, words)
 
 
 def test_missing_section_is_an_error():
-    cfg = load_config(os.path.join(ROOT, "configs", "cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "cpu.py"))
     del cfg["eval"]
     with pytest.raises(cc.ConfigError, match="'eval'"):
         cc.check_config(cfg)
@@ -89,7 +89,7 @@ def test_missing_section_is_an_error():
 
 def test_every_rule_names_a_field_of_the_base_config():
     """A renamed or dropped field must not leave a rule that silently never runs."""
-    cfg = load_config(os.path.join(ROOT, "configs", "base.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "base.py"))
     dead = [p for p in cc.RULES if not cc._items(cfg, p)]
     assert not dead, dead
 
@@ -126,7 +126,7 @@ def test_a_tof_rule_lives_once(field, value):
     built in code: both run config_check's rule (no second copy in foottof.sensors.tof)."""
     from foottof.sensors import tof
 
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     cfg.sensor[field] = value
     with pytest.raises(cc.ConfigError) as from_config:
         cc.check_config(cfg)
@@ -143,7 +143,7 @@ def test_a_noise_stage_rule_lives_once(field, value):
     """Likewise for noise.stage*: DegradationBounds.from_config runs config_check's rules."""
     from foottof.sensors.degradation import DegradationBounds
 
-    cfg = load_config(os.path.join(ROOT, "configs", "stage1_cpu.py"))
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
     cfg.noise.stage2[field] = value
     with pytest.raises(cc.ConfigError) as from_config:
         cc.check_config(cfg)
@@ -153,6 +153,83 @@ def test_a_noise_stage_rule_lives_once(field, value):
     assert str(from_config.value).startswith(f"noise.stage2.{field}={value!r}: must")
 
 
+def _config_error(field, value) -> str:
+    """The one line check_config gives for the stage-1 CPU config with ``field`` set to ``value``."""
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
+    _set(cfg, field, value)
+    with pytest.raises(cc.ConfigError) as e:
+        cc.check_config(cfg)
+    assert str(e.value).startswith(f"{field}={value!r}: must"), str(e.value)
+    return str(e.value)
+
+
+# (TileSpec field, config field, bad value): one case per terrain rule TileSpec runs.
+TILE_BAD = [
+    ("length_m", "terrain.tile_length_m", 6.02),  # a multiple of cell_m
+    ("width_m", "terrain.tile_width_m", 4.02),
+    ("platform_length_m", "terrain.platform_length_m", 1.5),
+    ("goal_length_m", "terrain.goal_length_m", 1.02),
+    ("length_m", "terrain.tile_length_m", 3.2),  # >= platform + goal + 1 m of course
+    ("length_m", "terrain.tile_length_m", -6.0),  # > 0
+    ("cell_m", "terrain.cell_m", 0.05),  # in (0, MAX_CELL_M]
+    ("pit_z_m", "terrain.pit_z_m", -0.4),  # <= -0.5
+    ("z_range_m", "terrain.z_range_m", 1.6),  # pit_z_m + z_range_m >= 1
+    ("foot_radius_m", "env.model.foot_radius_m", 0.019),  # limits.FOOT_RADIUS_RANGE_M
+    ("foot_radius_m", "env.model.foot_radius_m", 0.051),
+]
+
+
+@pytest.mark.parametrize(
+    "spec_field, field, value", TILE_BAD, ids=[f"{f}={v}" for f, _, v in TILE_BAD]
+)
+def test_a_tile_rule_lives_once(spec_field, field, value):
+    """A bad tile value gives the same one line from the whole-config check and from a TileSpec
+    built in code: both run config_check's rule (no second copy in foottof.terrain.tiles)."""
+    from foottof.terrain.tiles import TileSpec
+
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
+    assert TileSpec.from_config(cfg.terrain) == TileSpec()  # the config's tile is the default
+    with pytest.raises(ValueError) as from_spec:
+        TileSpec(**{spec_field: value})
+    assert str(from_spec.value) == _config_error(field, value)
+
+
+# (make_model keyword, bad value): one case per env.model rule the model builder runs.
+MODEL_BAD = [
+    ("timestep", 0.05),  # in (0, MAX_TIMESTEP_S]
+    ("solref_timeconst", 0.005),  # >= 2 * timestep
+    ("cone", "round"),
+    ("solver", "pgs"),
+    ("body_condim", 6),
+    ("iterations", 0),
+    ("ls_iterations", 0),
+    ("armature", -0.1),
+    ("impratio", -1.0),
+    ("solref_dampratio", 0.0),
+    ("shank_scale", 0.79),  # limits.LEVEL_RANGES["shank_length"]
+    ("shank_scale", 1.21),
+    ("foot_radius_m", 0.019),
+]
+
+
+@pytest.mark.parametrize("field, value", MODEL_BAD, ids=[f"{f}={v}" for f, v in MODEL_BAD])
+def test_a_model_rule_lives_once(field, value):
+    """A bad env.model value gives the same one line from the whole-config check and from the
+    robot model built in code (the config unpacks into make_model; the kinematics run the
+    shank_scale rule): no second copy in foottof.robot."""
+    from foottof.robot import kinematics, model
+
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
+    line = _config_error(f"env.model.{field}", value)
+    with pytest.raises(ValueError) as from_model:
+        model.make_model(**{**cfg.env.model, field: value})
+    assert str(from_model.value) == line
+    if field == "shank_scale":
+        with pytest.raises(ValueError) as from_kinematics:
+            kinematics.check_shank_scale(value)
+        assert str(from_kinematics.value) == line
+
+
 def test_check_imports_no_jax():
     """What makes a bad value fail in about a second: no JAX import before the check."""
     code = (
@@ -160,6 +237,6 @@ def test_check_imports_no_jax():
         "config_check.check_config(load_config('configs/cpu.py'));"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('jax', 'mujoco')))"
     )
-    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]", r.stdout

@@ -7,7 +7,7 @@ import jax.numpy as jp
 import mujoco
 import numpy as np
 import pytest
-from helpers import hfield_mj_model
+from helpers import REPO, hfield_mj_model
 
 from configs import flat
 from foottof.envs.anymal_tof import critic_height_scan, critic_scan_points
@@ -15,8 +15,7 @@ from foottof.ppo import checkpoint as ckpt
 from foottof.ppo.networks import make_networks
 from foottof.terrain import Heightfield
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
-FLAT_POLICY = os.path.join(ROOT, "policies", "flat")
+FLAT_POLICY = os.path.join(REPO, "policies", "flat")
 ACTOR_OBS, CRITIC_OBS = 181, 223  # policies/flat's observation sizes (its checkpoint manifest)
 
 

@@ -8,22 +8,19 @@ import csv
 import json
 import math
 import os
-import subprocess
-import sys
 from typing import NamedTuple
 
 import jax
 import jax.numpy as jp
 import numpy as np
 import pytest
+from helpers import REPO, run_cli
 
 from configs import smoke
 from foottof.eval import cells, harness, paired, plots, results
 from foottof.eval import robustness as rb
 from foottof.perception import check_source
 from foottof.ppo import run_dir
-
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 def tiny_cfg():
@@ -363,15 +360,7 @@ def test_write_atomic_leaves_nothing_on_error(tmp_path):
     ],
 )
 def test_cli_bad_input(args, message, tmp_path):
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
-    p = subprocess.run(
-        [sys.executable, os.path.join(REPO, "evaluate.py"), "--out", str(tmp_path), *args],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=300,
-    )
+    p = run_cli("evaluate.py", "--out", str(tmp_path), *args, timeout=300)
     assert p.returncode != 0
     err_lines = [ln for ln in p.stderr.splitlines() if ln.startswith("error:")]
     assert len(err_lines) == 1 and message in err_lines[0], p.stderr[-2000:]
@@ -701,7 +690,6 @@ def test_checkpoint_layout_mismatch_and_roundtrip(tmp_path):
 
 @pytest.mark.slow
 def test_cli_analyze_and_export_end_to_end(tmp_path):  # two env compiles in subprocesses (~3 min)
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
     tiny = [
         "--config",
         os.path.join(REPO, "configs", "smoke.py"),
@@ -712,27 +700,20 @@ def test_cli_analyze_and_export_end_to_end(tmp_path):  # two env compiles in sub
         "--out",
         str(tmp_path),
     ]
-    p = subprocess.run(
-        [
-            sys.executable,
-            os.path.join(REPO, "evaluate.py"),
-            "--analyze",
-            "--source",
-            "mock_aggre",
-            "--perturbation",
-            "odometry",
-            "--levels",
-            "2",
-            "--video",
-            "gif",
-            "--video_stride",
-            "5",
-            *tiny,
-        ],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        env=env,
+    p = run_cli(
+        "evaluate.py",
+        "--analyze",
+        "--source",
+        "mock_aggre",
+        "--perturbation",
+        "odometry",
+        "--levels",
+        "2",
+        "--video",
+        "gif",
+        "--video_stride",
+        "5",
+        *tiny,
         timeout=900,
     )
     assert p.returncode == 0, p.stderr[-3000:]
@@ -743,14 +724,7 @@ def test_cli_analyze_and_export_end_to_end(tmp_path):  # two env compiles in sub
     with np.load(tmp_path / f"episode_{tag}.npz") as f:
         assert f["qpos"].shape[1] == 19 and str(f["source"]) == "mock_aggre"
     out = tmp_path / "policy.npz"
-    p = subprocess.run(
-        [sys.executable, os.path.join(REPO, "evaluate.py"), "--export", str(out), *tiny],
-        cwd=REPO,
-        capture_output=True,
-        text=True,
-        env=env,
-        timeout=900,
-    )
+    p = run_cli("evaluate.py", "--export", str(out), *tiny, timeout=900)
     assert p.returncode == 0, p.stderr[-3000:]
     from foottof.ppo.export import NumpyPolicy
 

@@ -4,17 +4,16 @@ import os
 
 import nbformat
 import pytest
+from helpers import REPO
 from nbclient import NotebookClient
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 
 
 @pytest.mark.slow  # ~3 min alone (every cell, two compiles): make test-slow
 def test_quickstart_notebook_runs(tmp_path):
-    path = os.path.join(ROOT, "notebooks", "quickstart.ipynb")
+    path = os.path.join(REPO, "notebooks", "quickstart.ipynb")
     nb = nbformat.read(path, as_version=4)
     client = NotebookClient(
-        nb, timeout=900, kernel_name="python3", resources={"metadata": {"path": ROOT}}
+        nb, timeout=900, kernel_name="python3", resources={"metadata": {"path": REPO}}
     )
     client.execute()
     outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]

@@ -3,6 +3,7 @@
 import csv
 import os
 import re
+import warnings
 
 import jax
 import jax.numpy as jp
@@ -187,6 +188,32 @@ def test_numpy_policy_at_default_size(tmp_path):
     assert [len(c[0]) for c in policy.carry] == [cfg.lstm_hidden_size] * cfg.lstm_num_layers
     with pytest.raises(ValueError, match=r"obs shape \(47,\)"):
         policy(x[:47])
+
+
+def test_numpy_policy_on_large_inputs_warns_not_and_equals_jax(tmp_path):
+    """Normalized inputs of +-1000 drive the LSTM gates' and the SiLU head's sigmoids to +-1e3-ish
+    arguments, where exp(-x) of float32 overflows past 88: the NumPy policy must not warn
+    ("overflow encountered in exp") and must still give the JAX actor's actions."""
+    cfg = tiny_cfg().network
+    cfg.activation, cfg.obs_skip = "silu", True  # the head's SiLU reads the raw normalized obs
+    networks = net.make_networks(3, cfg)
+    obs = jp.zeros((1, 6))
+    params = networks.init_params(jax.random.PRNGKey(0), obs)
+    normalizer = networks.init_normalizer(obs)  # mean 0, std 1: normalized = raw
+    path = export.export_policy(str(tmp_path / "p"), networks, params, normalizer)
+    policy = export.NumpyPolicy(path)
+    xs = 1000.0 * np.random.default_rng(0).choice([-1.0, 1.0], size=(4, 6)).astype(np.float32)
+    carry, reset = networks.init_carry(1), jp.ones((1,), bool)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        np_actions = np.array([policy(x) for x in xs])
+    jax_actions = []
+    for x in xs:
+        carry, mean, _, _ = networks.step(params, normalizer, carry, jp.asarray(x)[None], reset)
+        jax_actions.append(np.asarray(mean[0]))
+        reset = jp.zeros((1,), bool)
+    np.testing.assert_allclose(np_actions, np.array(jax_actions), rtol=1e-5, atol=1e-5)
+    assert np.abs(np_actions).max() > 1.0  # the large inputs reached the output
 
 
 # ------------------------------------------------------------------------------- brax env

@@ -5,11 +5,11 @@ import os
 import shutil
 
 import pytest
+from helpers import REPO
 
 from foottof.lab import ship as ship_lib
 from foottof.ppo.checkpoint import integrity_problem, policy_digest
 
-REPO = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 SHIPPED = os.path.join(REPO, "policies", "stage1")
 
 

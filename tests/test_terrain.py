@@ -292,6 +292,18 @@ def test_same_key_same_tile_repeat():
 # --------------------------------------------------------------------------------- bad input
 
 
+def test_height_colours_run_dark_to_light():
+    """The figure's and the video's terrain colour: luminance rises with height, a pit floor
+    (-1 m) near black, a top at 0 m light, +-0.1 m stone tops visibly apart."""
+    from foottof.terrain.preview import height_rgb
+
+    z = np.linspace(-1.2, 1.0, 221)
+    lum = height_rgb(z) @ np.array([0.299, 0.587, 0.114])
+    assert np.all(np.diff(lum) >= 0) and np.diff(lum).sum() > 0.8
+    pit, top, low, high = height_rgb([-1.0, 0.0, -0.1, 0.1]) @ np.array([0.299, 0.587, 0.114])
+    assert pit < 0.1 < 0.6 < top and high - low > 0.3
+
+
 def test_bad_name_and_difficulty_raise():
     key = jax.random.key(0)
     with pytest.raises(ValueError, match=r"'stepping'.*grid_stones.*pyramid_down"):
@@ -301,7 +313,7 @@ def test_bad_name_and_difficulty_raise():
             generate_tile("beam", key, bad)
     with pytest.raises(ValueError, match="cell_m"):
         TileSpec(cell_m=0.05)
-    with pytest.raises(ValueError, match="multiple of cell_m"):
+    with pytest.raises(ValueError, match=r"multiple of terrain\.cell_m"):
         TileSpec(platform_length_m=1.5)
 
 

@@ -3,24 +3,13 @@
 import csv
 import math
 import os
-import subprocess
-import sys
 
 import pytest
-
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+from helpers import run_cli
 
 
 def _train(*args, timeout=600):
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
-    return subprocess.run(
-        [sys.executable, "train.py", *args],
-        cwd=ROOT,
-        capture_output=True,
-        text=True,
-        timeout=timeout,
-        env=env,
-    )
+    return run_cli("train.py", *args, timeout=timeout)
 
 
 def test_unknown_config_key_is_an_error(tmp_path):
@@ -83,10 +72,7 @@ WARP_LINE = "Failed to import"
     ids=" ".join,
 )
 def test_no_warp_import_lines(cmd):
-    env = dict(os.environ, JAX_PLATFORMS="cpu")
-    r = subprocess.run(
-        [sys.executable, *cmd], cwd=ROOT, capture_output=True, text=True, timeout=120, env=env
-    )
+    r = run_cli(*cmd, timeout=120)
     out = r.stdout + r.stderr
     assert WARP_LINE not in out, out
     assert "flags" in out or "unknown source 'nope'" in out, out  # the command itself still speaks

@@ -76,7 +76,9 @@ def actor_arrays(networks, params, normalizer) -> tuple[dict, dict]:
 
 
 def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 1.0 / (1.0 + np.exp(-x))
+    """1 / (1 + exp(-x)) without overflow: exp only of -|x| <= 0 (x >= 0: the same formula)."""
+    e = np.exp(-np.abs(x))
+    return np.where(x >= 0, 1.0 / (1.0 + e), e / (1.0 + e))
 
 
 _ACT = {

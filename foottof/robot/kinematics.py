@@ -9,7 +9,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from foottof import constants
+from foottof import config_check, constants
 
 # Leg geometry of the LF leg in base-aligned axes at q = 0 [m], from the ANYmal-D URDF
 # (ANYbotics/anymal_d_simple_description urdf/anymal.urdf, HEAD d5bf4dc3; fixed links merged).
@@ -20,7 +20,6 @@ HAA_TO_HFE_M = (0.069, 0.006, 0.0)  # HAA anchor -> HFE anchor (thigh body origi
 HFE_TO_KFE_M = (0.0, 0.1805, -0.285)  # HFE anchor -> KFE anchor (shank body origin)
 KFE_TO_FOOT_M = (0.100, 0.01411, -0.36208)  # KFE anchor -> foot sphere centre (x shank_scale)
 
-SHANK_SCALE_RANGE = (0.8, 1.2)  # valid shank_scale (paper's model-mismatch study: +-20 %)
 TOF_TILT_RANGE_DEG = (0.0, 45.0)  # valid outward tilt of the ToF optical axis [deg]
 
 
@@ -55,9 +54,9 @@ def mirror(vec_lf, leg: str) -> np.ndarray:
 
 
 def check_shank_scale(shank_scale: float) -> None:
-    lo, hi = SHANK_SCALE_RANGE
-    if not lo <= float(shank_scale) <= hi:
-        raise ValueError(f"shank_scale={shank_scale} outside the valid range [{lo}, {hi}]")
+    """config_check's env.model.shank_scale rule (limits.LEVEL_RANGES['shank_length'], the
+    paper's model-mismatch study: +-20 %): its one-line ValueError if outside."""
+    config_check.check_fields("env.model", {"shank_scale": float(shank_scale)})
 
 
 def check_tof_tilt(tof_tilt_deg: float) -> None:
@@ -115,7 +114,7 @@ def forward_kinematics(
 
     Args:
       q: (..., 12) joint angles [rad] in constants.JOINT_NAMES order (HAA, HFE, KFE per leg).
-      shank_scale: scale of the KFE -> foot offset (static, in SHANK_SCALE_RANGE).
+      shank_scale: scale of the KFE -> foot offset (static, see check_shank_scale).
       tof_tilt_deg: outward tilt of the optical axis [deg] (static, in TOF_TILT_RANGE_DEG).
 
     Returns:

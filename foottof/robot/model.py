@@ -7,7 +7,7 @@ import math
 import mujoco
 import numpy as np
 
-from foottof import constants
+from foottof import config_check, constants
 from foottof.robot import kinematics as kin
 from foottof.terrain.heightfield import Heightfield, hfield_xml, write_to_mjmodel
 
@@ -54,8 +54,6 @@ BASE_SPHERE_CENTRES_M = tuple(
 )
 KNEE_SPHERE_RADIUS_M = 0.0595  # one per knee, centred on the KFE axis (shank cylinder r = 0.071)
 
-FOOT_RADIUS_RANGE_M = (0.02, 0.05)  # valid foot_radius_m
-
 # Physics tuning defaults (mirrored field by field in configs/_env.py, section env.model).
 DEFAULT_TUNING = {
     "armature": 0.02,  # reflected rotor inertia added to every leg joint [kg m^2]
@@ -75,12 +73,6 @@ DEFAULT_TUNING = {
     "eulerdamp": False,  # implicit joint damping in the Euler integrator (off: faster)
     "timestep": constants.PHYSICS_DT_S,  # physics step [s]
 }
-_CHOICES = {
-    "solver": ("newton", "cg"),
-    "cone": ("pyramidal", "elliptic"),
-    "body_condim": (1, 3),
-    "body_collision": (True, False),
-}
 _SOLVER_MJCF = {"newton": "Newton", "cg": "CG"}
 
 
@@ -98,27 +90,23 @@ def _inertial(mass, com, inertia) -> str:
     return f'<inertial pos="{_f(com)}" mass="{_f(mass)}" fullinertia="{_f(inertia)}"/>'
 
 
-def _validate_tuning(tuning: dict) -> dict:
+def _validate_tuning(
+    tuning: dict, shank_scale: float = 1.0, foot_radius_m: float = constants.FOOT_RADIUS_M
+) -> dict:
+    """The tuning (DEFAULT_TUNING updated by ``tuning``) after config_check's env.model rules
+    (on it and on the model geometry ``shank_scale``, ``foot_radius_m``).
+
+    Raises:
+      ValueError: an unknown key, or a value outside its rule (config_check's one-line error).
+    """
     unknown = sorted(set(tuning) - set(DEFAULT_TUNING))
     if unknown:
         raise ValueError(f"unknown tuning keys {unknown}; valid keys: {sorted(DEFAULT_TUNING)}")
     t = {**DEFAULT_TUNING, **tuning}
-    for k, choices in _CHOICES.items():
-        if t[k] not in choices:
-            raise ValueError(f"{k}={t[k]!r} is not one of {choices}")
-    for k in ("iterations", "ls_iterations"):
-        if int(t[k]) < 1:
-            raise ValueError(f"{k}={t[k]} must be >= 1")
-    for k in ("armature", "joint_damping", "foot_friction", "body_friction", "impratio"):
-        if float(t[k]) < 0:
-            raise ValueError(f"{k}={t[k]} must be >= 0")
-    if not 0 < float(t["timestep"]) <= 0.01:
-        raise ValueError(f"timestep={t['timestep']} outside (0, 0.01] s")
-    if float(t["solref_timeconst"]) < 2 * float(t["timestep"]):
-        raise ValueError(
-            f"solref_timeconst={t['solref_timeconst']} must be >= 2 * timestep "
-            f"= {2 * t['timestep']}"
-        )
+    config_check.check_fields(  # the env.model.* rules, held once (foottof.config_check)
+        "env.model",
+        {"shank_scale": float(shank_scale), "foot_radius_m": float(foot_radius_m), **t},
+    )
     return t
 
 
@@ -166,12 +154,8 @@ def make_model_xml(
     **tuning,
 ) -> str:
     """MJCF text of the robot on a plane or a heightfield (see :func:`make_model`)."""
-    kin.check_shank_scale(shank_scale)
     kin.check_tof_tilt(tof_tilt_deg)
-    lo, hi = FOOT_RADIUS_RANGE_M
-    if not lo <= float(foot_radius_m) <= hi:
-        raise ValueError(f"foot_radius_m={foot_radius_m} outside the valid range [{lo}, {hi}] m")
-    t = _validate_tuning(tuning)
+    t = _validate_tuning(tuning, shank_scale, foot_radius_m)
 
     terrain_attrs = 'contype="0" conaffinity="1" condim="3" rgba="0.5 0.55 0.6 1"'
     if hfield is None:
@@ -262,7 +246,7 @@ def make_model(
       shank_scale: scale of the KFE -> foot offset (foot sphere, ToF site, visual shank) in
         [0.8, 1.2]; masses and inertias unchanged.
       tof_tilt_deg: outward tilt of the ToF optical axis in [0, 45] deg.
-      foot_radius_m: foot sphere radius in [0.02, 0.05] m.
+      foot_radius_m: foot sphere radius in foottof.limits.FOOT_RADIUS_RANGE_M [m].
       **tuning: physics settings, keys of DEFAULT_TUNING (configs/_env.py section ``env.model``).
 
     Returns:

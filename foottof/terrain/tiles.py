@@ -10,7 +10,7 @@ import jax
 import jax.numpy as jp
 import numpy as np
 
-from foottof.limits import MAX_CELL_M
+from foottof import config_check, constants
 
 # The paper's nine types, in order: stage 1 (first five), then the four stage-2 additions.
 TERRAIN_TYPES = (
@@ -104,10 +104,13 @@ class TileSpec:
     ``j < n_start``) to the goal region (columns ``j >= nx - n_goal``), both flat at z = 0; the
     course in between holds the terrain, with a pit at ``pit_z_m`` under stones and beams.
 
+    Its fields obey config_check's terrain.* rules (a field named ``x_m`` here is the config's
+    ``terrain.tile_x_m``) and ``env.model.foot_radius_m``; a bad one raises their one-line error.
+
     Attributes:
       length_m: extent along +x [m]; ``nx = length_m / cell_m`` vertex columns.
       width_m: extent along +y [m]; ``ny = width_m / cell_m`` vertex rows.
-      cell_m: vertex spacing [m], at most 0.04.
+      cell_m: vertex spacing [m], at most foottof.limits.MAX_CELL_M.
       platform_length_m: start platform length along x [m].
       goal_length_m: goal region length along x [m].
       pit_z_m: pit floor z [m]; also the Heightfield floor (elevation 0).
@@ -122,31 +125,22 @@ class TileSpec:
     goal_length_m: float = 1.0
     pit_z_m: float = -1.0
     z_range_m: float = 2.0
-    foot_radius_m: float = 0.0315
+    foot_radius_m: float = constants.FOOT_RADIUS_M
 
     def __post_init__(self):
-        if not 0.0 < self.foot_radius_m <= 0.1:
-            raise ValueError(f"foot_radius_m={self.foot_radius_m} must be in (0, 0.1] m")
-        if not 0.0 < self.cell_m <= MAX_CELL_M:
-            raise ValueError(f"cell_m={self.cell_m} must be in (0, {MAX_CELL_M}] m")
-        for name in ("length_m", "width_m", "platform_length_m", "goal_length_m"):
-            value = getattr(self, name)
-            n = value / self.cell_m
-            if value <= 0 or abs(n - round(n)) > 1e-6:
-                raise ValueError(
-                    f"{name}={value} must be a positive multiple of cell_m={self.cell_m}"
-                )
-        if self.platform_length_m + self.goal_length_m > self.length_m - 1.0:
-            raise ValueError(
-                f"platform_length_m + goal_length_m = "
-                f"{self.platform_length_m + self.goal_length_m} must leave >= 1 m of course in "
-                f"length_m={self.length_m}"
-            )
-        if self.pit_z_m > -0.5 or self.pit_z_m + self.z_range_m < 1.0:
-            raise ValueError(
-                f"pit_z_m={self.pit_z_m}, z_range_m={self.z_range_m}: need pit_z_m <= -0.5 and "
-                "pit_z_m + z_range_m >= 1.0 m to hold every terrain type"
-            )
+        config_check.check_fields(  # the terrain.* rules, held once (foottof.config_check)
+            "terrain",
+            {
+                "tile_length_m": self.length_m,
+                "tile_width_m": self.width_m,
+                "cell_m": self.cell_m,
+                "platform_length_m": self.platform_length_m,
+                "goal_length_m": self.goal_length_m,
+                "pit_z_m": self.pit_z_m,
+                "z_range_m": self.z_range_m,
+            },
+        )
+        config_check.check_fields("env.model", {"foot_radius_m": self.foot_radius_m})
 
     @property
     def nx(self) -> int:

@@ -60,9 +60,9 @@ def main(argv):
     try:
         init_params = None
         if t.get("teacher", ""):  # distillation: the teacher's env and the student's init
-            from foottof.ppo import distill
+            from foottof.ppo import teacher
 
-            env, init_params = distill.make_distill_env(cfg)
+            env, init_params = teacher.make_distill_env(cfg)
         else:
             env = make_training_env(cfg)
         runner.run(

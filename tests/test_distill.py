@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from helpers import small_cfg, tiny_cfg, tree_equal
 
-from foottof.ppo import distill, export, runner, toy_envs
+from foottof.ppo import distill, export, runner, teacher, toy_envs
 from foottof.ppo import train as train_lib
 
 EPISODE = 8  # steps; steps 1..7 are rewarded
@@ -162,6 +162,6 @@ def test_teacher_of_another_layout_is_one_clear_error(tmp_path):
     tenv = toy_envs.make_memory_env(EPISODE, privileged=True)  # actor: 2 inputs
     runner.run(tiny_cfg(num_iterations=1), tenv, str(tmp_path / "t"))
     with pytest.raises(ValueError, match=r"train.teacher=.*does not fit.*3 actor inputs"):
-        distill.load_teacher(
+        teacher.load_teacher(
             str(tmp_path / "t"), toy_envs.make_memory_env(EPISODE, teacher=True), tiny_cfg().network
         )

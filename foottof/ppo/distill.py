@@ -21,9 +21,6 @@ that PPO fine-tuning (``train.init_from`` = the student) starts from a value fun
 
 from __future__ import annotations
 
-import json
-import os
-
 import jax
 import jax.numpy as jp
 import numpy as np
@@ -132,89 +129,3 @@ def student_from_teacher(student_params, student_normalizer, teacher_params, tea
         jax.tree.map(lambda s, x: jp.asarray(x, s.dtype), student_params, params),
         jax.tree.map(lambda s, x: jp.asarray(x, s.dtype), student_normalizer, normalizer),
     )
-
-
-def load_teacher(path: str, env, network_cfg):
-    """(Networks, params, normalizer) of the teacher at ``path`` (a run or policy folder, or one
-    checkpoint) for the batched ``env`` whose actor observation it must read.
-
-    Raises:
-      ValueError: one line naming the teacher and both input sizes when its actor was trained on
-        another observation layout (e.g. without env.actor_terrain).
-    """
-    from foottof.ppo import checkpoint as ckpt
-
-    shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
-    obs = jax.tree.map(lambda s: jp.zeros((1,) + s.shape[1:], s.dtype), shape.obs)
-    networks = net.make_networks(env.action_size, network_cfg)
-    params = networks.init_params(jax.random.PRNGKey(0), obs)
-    normalizer = networks.init_normalizer(obs)
-    try:
-        params, normalizer = ckpt.load_params_and_normalizer(path, params, normalizer, grow=False)
-    except ckpt.CheckpointMismatch as e:
-        want = obs[net.ACTOR_KEY].shape[-1] if isinstance(obs, dict) else obs.shape[-1]
-        raise ValueError(
-            f"train.teacher={path!r} does not fit this env's teacher observation ({want} actor "
-            f"inputs; a teacher is trained with env.actor_terrain=True and the same sensor and "
-            f"critic layout as the student's config): {e}"
-        ) from None
-    return networks, params, normalizer
-
-
-def teacher_network_cfg(path: str, default):
-    """The teacher's c.network from its run config (config.json beside or above ``path``)."""
-    import ml_collections
-
-    from foottof.ppo import run_dir as run_dirs
-
-    config = run_dirs.run_config_path(path)
-    if config is None:
-        return default
-    with open(config) as f:
-        saved = json.load(f).get("network")
-    if not saved:
-        return default
-    out = ml_collections.ConfigDict(dict(default))
-    for k, v in saved.items():
-        if k in out:
-            out[k] = tuple(v) if isinstance(v, list) else v
-    return out
-
-
-def check_teacher_path(path: str) -> None:
-    if not os.path.exists(path):
-        raise FileNotFoundError(
-            f"train.teacher={path!r} does not exist; train a teacher first "
-            f"(python train.py --config configs/teacher_cpu.py) or pass --config.train.teacher=PATH"
-        )
-
-
-def make_distill_env(cfg):
-    """(batched TeacherEnv, init function) for a distillation run of the ToF env: the env is
-    built with env.actor_terrain on (the teacher's observation; ``cfg`` itself keeps the
-    student's layout, so its saved run config evaluates the student), the teacher loaded from
-    ``cfg.train.teacher``, and the init function cuts the student from the teacher
-    (:func:`student_from_teacher`; used where the run has no train.init_from)."""
-    from foottof.envs import make_training_env
-    from foottof.envs.anymal_tof import ACTOR_TERRAIN_INPUTS
-
-    path = str(cfg.train.teacher)
-    check_teacher_path(path)
-    if cfg.env.get("actor_terrain", False):
-        raise ValueError(
-            "env.actor_terrain=True in a distillation config: the config is the student's "
-            "(sensors only); the teacher's terrain inputs are added for it"
-        )
-    full = cfg.copy_and_resolve_references()
-    with full.unlocked():
-        full.env.actor_terrain = True
-    env = make_training_env(full)
-    teacher = load_teacher(path, env, teacher_network_cfg(path, cfg.network))
-    shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
-    student_obs_size = shape.obs[net.ACTOR_KEY].shape[-1] - ACTOR_TERRAIN_INPUTS
-    _, t_params, t_norm = teacher
-
-    def init(params, normalizer):
-        return student_from_teacher(params, normalizer, t_params, t_norm)
-
-    return TeacherEnv(env, teacher, student_obs_size), init

@@ -34,12 +34,19 @@ def main(argv):
     del argv
     logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint write at INFO
     from foottof import config_check
+    from foottof.ppo import distributed
     from foottof.ppo import run_dir as run_dirs
 
     cfg = _CONFIG.value
     t = cfg.train
     try:  # checks that need no JAX, env or compile come first: bad input fails in a second
+        setup = distributed.parse_env()  # several processes (README_multihost.md), or None
         config_check.check_config(cfg)
+        if setup and setup.num_processes > 1 and not _RUN_DIR.value:
+            raise ValueError(
+                f"{setup.num_processes} processes ({setup.source}) write one run: give them "
+                f"the same --run_dir (a folder every process can see)"
+            )
         run_dir, latest = run_dirs.resolve_run_dir(
             t.run_root, t.run_name, _RUN_DIR.value, _RESUME.value
         )
@@ -51,6 +58,15 @@ def main(argv):
             f"error: train.init_from={init_from!r} does not exist; train stage 1 first "
             f"(python train.py --config configs/stage1.py) or pass --config.train.init_from=PATH"
         )
+    try:  # before any other JAX call; then the global device count is known, before compiling
+        distributed.initialize()
+        import jax
+
+        distributed.check_num_envs(
+            cfg.ppo.num_envs, cfg.ppo.num_minibatches, jax.device_count(), jax.process_count()
+        )
+    except ValueError as e:
+        sys.exit(f"error: {e}")
     what = "continuing" if _RESUME.value else "new run"
     print(f"[train] {what} in {run_dir}" + (f" ({latest} links to it)" if latest else ""))
     from foottof.envs import make_training_env

@@ -10,11 +10,12 @@ and a mismatch error names the leaf. Orbax writes into a temporary folder and re
 Damage. Orbax reads only the byte ranges a restore needs and checks nothing else, so a truncated
 or missing file can go unnoticed or surface as a TensorStore error deep in a traceback. Each
 checkpoint therefore also holds INTEGRITY_FILE: the size and SHA-256 of every file in it, written
-(atomically) after orbax finished. A checkpoint whose files do not match it, or that orbax cannot
-read, is *unreadable* (:class:`CheckpointUnreadable`, one line naming the path and the cause);
-one whose leaves differ from the model *does not fit* (:class:`CheckpointMismatch`, a
-ValueError). ``Checkpointer.restore`` falls back to the newest checkpoint that reads; checkpoints
-written before the record existed are checked by reading them only.
+(atomically, by process 0 of a multi-process run) after orbax finished. A checkpoint whose files
+do not match it, or that orbax cannot read, is *unreadable* (:class:`CheckpointUnreadable`, one
+line naming the path and the cause); one whose leaves differ from the model *does not fit*
+(:class:`CheckpointMismatch`, a ValueError). ``Checkpointer.restore`` falls back to the newest
+checkpoint that reads; checkpoints written before the record existed are checked by reading them
+only.
 """
 
 import contextlib
@@ -285,7 +286,8 @@ class Checkpointer:
         args["manifest"] = ocp.args.JsonSave(manifest)
         self._manager.save(step, args=ocp.args.Composite(**args), force=True)
         self._manager.wait_until_finished()
-        write_integrity(os.path.join(self.directory, str(step)))
+        if jax.process_index() == 0:  # one writer: orbax has gathered every process's files
+            write_integrity(os.path.join(self.directory, str(step)))
         return step
 
     def latest_step(self) -> int | None:

@@ -68,11 +68,23 @@ class Transition(NamedTuple):
     metrics: dict
 
 
+class Batch(NamedTuple):
+    """One rollout of the envs, what an update reads; the env axis is sharded over 'data'."""
+
+    traj: Transition  # leaves (T, N, ...)
+    carry: Any  # LSTM carry before the rollout's first step, (N, H) leaves
+    last_value: jax.Array  # (N,) value of the state after the last step
+
+
 class Train(NamedTuple):
-    """What make_train returns; `init` and `iteration` are jitted (iteration donates its input)."""
+    """What make_train returns; `init`, `iteration` and `update` are jitted (iteration donates its
+    input)."""
 
     init: Callable[[jax.Array], TrainState]  # key (2,) -> TrainState
     iteration: Callable[[TrainState], tuple[TrainState, dict]]  # state -> (state, scalar metrics)
+    # (params, opt_state, normalizer, Batch, key (2,)) -> (params, opt_state, normalizer, metrics
+    # (num_epochs, num_minibatches) per SGD step): the update epochs of `iteration` alone
+    update: Callable
     networks: net.Networks
     mesh: Mesh
     state_sharding: Any  # TrainState of NamedSharding
@@ -287,17 +299,10 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         metrics["ppo/grad_norm"] = optax.global_norm(grads)
         return (params, opt_state, normalizer), metrics
 
-    def _iteration_local(state: TrainState):
-        key, key_rollout, key_update = jax.random.split(state.key, 3)
-        # Each device gets its own rollout/shuffle stream; the state key stays replicated.
-        shard = jax.lax.axis_index(AXIS)
-        key_rollout = jax.random.fold_in(key_rollout, shard)
-        key_update = jax.random.fold_in(key_update, shard)
-        carry_start = state.carry  # stored initial carry of this rollout (before any reset)
-        (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = _rollout(
-            state, key_rollout
-        )
-
+    def _update_local(params, opt_state, normalizer, batch: Batch, key_update):
+        # key_update is replicated: each device folds in its index for its own shuffle stream.
+        key_update = jax.random.fold_in(key_update, jax.lax.axis_index(AXIS))
+        traj, carry_start, last_value = batch
         rewards = losses.bootstrap_truncation(traj.rewards, traj.values, traj.truncation, gamma)
         advantages, returns = losses.compute_gae(
             rewards, traj.values, traj.dones, last_value, gamma, lam
@@ -309,7 +314,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
 
         data = losses.Minibatch(
             carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
-            log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(state.params),
+            log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(params),
             values=traj.values, advantages=advantages, returns=returns,
         )  # fmt: skip
         n_local = traj.rewards.shape[1]
@@ -335,17 +340,32 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
             )
             return jax.lax.scan(_sgd_step, carry, minibatches)
 
-        (params, opt_state, _), sgd_metrics = jax.lax.scan(
+        (new_params, opt_state, _), sgd_metrics = jax.lax.scan(
             _epoch,
-            (state.params, state.opt_state, state.normalizer),
+            (params, opt_state, normalizer),
             jax.random.split(key_update, num_epochs),
         )
-        normalizer = state.normalizer
         if networks.normalize_observations:  # after the update: the loss used the rollout's stats
             normalizer = running_statistics.update(
                 normalizer, net.select_obs(traj.obs), pmap_axis_name=AXIS
             )
+        return new_params, opt_state, normalizer, sgd_metrics
 
+    def _iteration_local(state: TrainState):
+        key, key_rollout, key_update = jax.random.split(state.key, 3)
+        # Each device gets its own rollout stream; the state key stays replicated.
+        key_rollout = jax.random.fold_in(key_rollout, jax.lax.axis_index(AXIS))
+        carry_start = state.carry  # stored initial carry of this rollout (before any reset)
+        (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = _rollout(
+            state, key_rollout
+        )
+        params, opt_state, normalizer, sgd_metrics = _update_local(
+            state.params,
+            state.opt_state,
+            state.normalizer,
+            Batch(traj, carry_start, last_value),
+            key_update,
+        )
         metrics = _iteration_metrics(
             traj, sgd_metrics, networks.action_log_std(params), params, opt_state
         )
@@ -369,9 +389,20 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         out_shardings=(state_sharding, NamedSharding(mesh, P())),
         donate_argnums=0,
     )
+    # The update alone (tests: the same batch on 1 device and split over several).
+    update = jax.jit(
+        jax.shard_map(
+            _update_local,
+            mesh=mesh,
+            in_specs=(P(), P(), P(), Batch(P(None, AXIS), P(AXIS), P(AXIS)), P()),
+            out_specs=P(),
+            check_vma=False,
+        )
+    )
     return Train(
         init=init,
         iteration=iteration,
+        update=update,
         networks=networks,
         mesh=mesh,
         state_sharding=state_sharding,
@@ -423,6 +454,7 @@ def num_params(params) -> int:
 
 
 __all__ = [
+    "Batch",
     "Train",
     "TrainState",
     "Transition",

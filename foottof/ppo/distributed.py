@@ -1,0 +1,155 @@
+"""Several processes (hosts, or one per GPU) as one trainer: JAX's distributed runtime from env vars.
+
+Which variables start it (read by `parse_env`, which imports no JAX):
+- `JAX_COORDINATOR_ADDRESS` (host:port of process 0, the same on all processes),
+  `JAX_NUM_PROCESSES` and `JAX_PROCESS_ID` (0..num-1, one per process): all three, or none;
+- else a SLURM step of several tasks (`srun` with `SLURM_NTASKS` > 1): the process count and id are
+  `SLURM_NTASKS` / `SLURM_PROCID`, and JAX derives the coordinator (the step's first node, a port
+  from the job id; `JAX_COORDINATOR_ADDRESS` / `JAX_COORDINATOR_PORT` override it) and gives each
+  task the GPU `SLURM_LOCALID` (`JAX_LOCAL_DEVICE_IDS=0,1,..` to give it several).
+A SLURM job of one task (`sbatch` / `salloc` shells) stays a single process with all its GPUs: JAX's
+own detection would start the runtime there and keep one GPU only, so we do not call it.
+`JAX_LOCAL_DEVICE_IDS` is read by JAX itself. Without these variables nothing changes.
+"""
+
+import os
+from collections.abc import Mapping
+from typing import NamedTuple
+
+JAX_VARS = ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
+SLURM_VARS = (
+    "SLURM_JOB_ID",
+    "SLURM_STEP_NODELIST",
+    "SLURM_NTASKS",
+    "SLURM_PROCID",
+    "SLURM_LOCALID",
+)
+
+
+class Setup(NamedTuple):
+    """What `jax.distributed.initialize` is called with."""
+
+    coordinator_address: str | None  # host:port; None: JAX derives it (SLURM)
+    num_processes: int
+    process_id: int  # 0..num_processes-1
+    source: str  # 'env' (JAX_* variables) or 'slurm'
+
+
+def _int(environ: Mapping[str, str], name: str) -> int:
+    text = environ[name]
+    try:
+        return int(text)
+    except ValueError:
+        raise ValueError(f"{name}={text!r} is not an integer") from None
+
+
+def _slurm_tasks(environ: Mapping[str, str]) -> int:
+    """SLURM_NTASKS of a SLURM step (0 outside one)."""
+    if not all(environ.get(v) for v in SLURM_VARS):
+        return 0
+    return _int(environ, "SLURM_NTASKS")
+
+
+def parse_env(environ: Mapping[str, str] | None = None) -> Setup | None:
+    """The distributed setup the environment asks for, checked; None: one process (no runtime).
+
+    Args:
+      environ: the variables (default os.environ).
+
+    Returns:
+      Setup, or None when neither the JAX_* variables nor a SLURM step of several tasks are set.
+
+    Raises:
+      ValueError: one line naming the variables and values: some JAX_* variables set but not all
+        (outside a SLURM step), a value that is not an integer, a process count < 1, a process
+        id outside 0..count-1, an address without a numeric port.
+    """
+    environ = os.environ if environ is None else environ
+    given = {v: environ[v] for v in JAX_VARS if environ.get(v)}
+    slurm_tasks = _slurm_tasks(environ)
+    if slurm_tasks > 1:  # a SLURM step of several tasks; JAX_* variables override its values
+        source = "slurm"
+        num = _int(environ, "JAX_NUM_PROCESSES" if "JAX_NUM_PROCESSES" in given else "SLURM_NTASKS")
+        pid = _int(environ, "JAX_PROCESS_ID" if "JAX_PROCESS_ID" in given else "SLURM_PROCID")
+        names = (
+            "JAX_NUM_PROCESSES" if "JAX_NUM_PROCESSES" in given else "SLURM_NTASKS",
+            "JAX_PROCESS_ID" if "JAX_PROCESS_ID" in given else "SLURM_PROCID",
+        )
+    elif given:
+        source = "env"
+        if missing := [v for v in JAX_VARS if v not in given]:
+            have = ", ".join(f"{k}={v}" for k, v in given.items())
+            raise ValueError(
+                f"{', '.join(missing)} not set ({have}): set all of {', '.join(JAX_VARS)} to run "
+                f"several processes, or none for one"
+            )
+        num, pid = _int(environ, "JAX_NUM_PROCESSES"), _int(environ, "JAX_PROCESS_ID")
+        names = ("JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
+    else:
+        return None
+    if num < 1:
+        raise ValueError(f"{names[0]}={num}: the process count must be >= 1")
+    if not 0 <= pid < num:
+        raise ValueError(
+            f"{names[1]}={pid} is out of range for {names[0]}={num} (ids are 0..{num - 1})"
+        )
+    address = given.get("JAX_COORDINATOR_ADDRESS")
+    if address is not None:
+        host, _, port = address.rpartition(":")
+        if not host or not port.isdigit():
+            raise ValueError(
+                f"JAX_COORDINATOR_ADDRESS={address!r} is not host:port (e.g. host0:1234, the "
+                f"address of process 0)"
+            )
+    return Setup(address, num, pid, source)
+
+
+def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
+    """Starts JAX's distributed runtime if the environment asks for it (see `parse_env`).
+
+    Call it before any other JAX call (it must come before the backend starts). CPU processes
+    talk through gloo collectives. Blocks until all processes have joined (JAX's timeout, 5 min).
+
+    Returns:
+      The Setup, or None for a single process (nothing was started).
+
+    Raises:
+      ValueError: a bad setup, one line (`parse_env`), or JAX's process count differs from it.
+    """
+    setup = parse_env(environ)
+    if setup is None:
+        return None
+    import jax
+
+    if jax.config.jax_cpu_collectives_implementation in (None, "none"):  # older JAX: none
+        jax.config.update("jax_cpu_collectives_implementation", "gloo")
+    jax.distributed.initialize(
+        coordinator_address=setup.coordinator_address,
+        num_processes=setup.num_processes,
+        process_id=setup.process_id,
+    )
+    if jax.process_count() != setup.num_processes:
+        raise ValueError(
+            f"jax.process_count()={jax.process_count()} after initialize, but the setup "
+            f"({setup.source}) asked for {setup.num_processes} processes"
+        )
+    return setup
+
+
+def check_num_envs(
+    num_envs: int, num_minibatches: int, num_devices: int, num_processes: int = 1
+) -> None:
+    """The envs split into whole minibatches on every device of every process.
+
+    Raises:
+      ValueError: one line naming ppo.num_envs, ppo.num_minibatches and the device count.
+    """
+    where = f"{num_devices} device(s)"
+    if num_processes > 1:
+        where += f" over {num_processes} processes"
+    if num_envs % (num_devices * num_minibatches):
+        raise ValueError(
+            f"ppo.num_envs={num_envs} is not divisible by ppo.num_minibatches * devices = "
+            f"{num_minibatches} * {num_devices} ({where}); each device steps num_envs / devices "
+            f"envs in whole minibatches"
+        )

@@ -1,0 +1,333 @@
+"""Several devices and processes (foottof/ppo/distributed.py, README_multihost.md).
+
+The setup read from env vars, the sharded update against the unsharded one, 2 processes x 1
+device against 1 process x 2 devices.
+
+The JAX side of the multi-device tests runs in fresh processes (tests/multidevice_worker.py): the
+device count and the distributed runtime are fixed when JAX starts.
+"""
+
+import csv
+import os
+import socket
+import subprocess
+import sys
+
+import multidevice_worker as w
+import numpy as np
+import pytest
+
+from foottof.ppo import distributed
+
+TESTS = os.path.dirname(os.path.abspath(__file__))
+ROOT = os.path.dirname(TESTS)
+WORKER = os.path.join(TESTS, "multidevice_worker.py")
+U = 2.0**-24  # float32 unit roundoff
+
+
+def _env(devices: int = 1, **extra) -> dict:
+    """os.environ for a child on `devices` fake CPU devices, without distributed variables."""
+    env = {
+        k: v
+        for k, v in os.environ.items()
+        if k not in distributed.JAX_VARS and not k.startswith("SLURM_")
+    }
+    env["JAX_PLATFORMS"] = "cpu"
+    flags = env.get("XLA_FLAGS", "")
+    env["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={devices}".strip()
+    env.update(extra)
+    return env
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]
+
+
+def _processes(cmd: list[str], n: int, timeout: int, **extra) -> list[subprocess.CompletedProcess]:
+    """`cmd` as processes 0..n-1 of one distributed run on localhost; their finished results."""
+    address = f"localhost:{_free_port()}"
+    procs = [
+        subprocess.Popen(
+            cmd,
+            cwd=ROOT,
+            env=_env(
+                JAX_COORDINATOR_ADDRESS=address,
+                JAX_NUM_PROCESSES=str(n),
+                JAX_PROCESS_ID=str(i),
+                **extra,
+            ),
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        for i in range(n)
+    ]
+    out = []
+    for p in procs:
+        stdout, stderr = p.communicate(timeout=timeout)
+        out.append(subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr))
+    return out
+
+
+# ------------------------------------------------------------------------ setup from env vars
+JAX3 = {"JAX_COORDINATOR_ADDRESS": "host0:1234", "JAX_NUM_PROCESSES": "2", "JAX_PROCESS_ID": "1"}
+SLURM = {
+    "SLURM_JOB_ID": "777",
+    "SLURM_STEP_NODELIST": "node[001-002]",
+    "SLURM_NTASKS": "4",
+    "SLURM_PROCID": "3",
+    "SLURM_LOCALID": "1",
+}
+
+
+def test_parse_env_reads_the_jax_and_slurm_variables():
+    assert distributed.parse_env({}) is None  # one process: nothing starts
+    assert distributed.parse_env({"HOME": "/root", "JAX_PLATFORMS": "cpu"}) is None
+    assert distributed.parse_env(JAX3) == ("host0:1234", 2, 1, "env")
+    # A SLURM step of 4 tasks: count and id from SLURM, the address left to JAX (nodelist).
+    assert distributed.parse_env(SLURM) == (None, 4, 3, "slurm")
+    over = {**SLURM, "JAX_COORDINATOR_ADDRESS": "node001:5555"}
+    assert distributed.parse_env(over) == ("node001:5555", 4, 3, "slurm")
+    # A SLURM job of one task (sbatch, salloc shell) stays one process with all its GPUs.
+    one = {**SLURM, "SLURM_NTASKS": "1", "SLURM_PROCID": "0", "SLURM_LOCALID": "0"}
+    assert distributed.parse_env(one) is None
+    # An allocation without a step (no SLURM_STEP_NODELIST): not a SLURM step.
+    assert distributed.parse_env({k: v for k, v in SLURM.items() if "STEP" not in k}) is None
+
+
+@pytest.mark.parametrize(
+    "environ, message",
+    [
+        (
+            {**JAX3, "JAX_PROCESS_ID": "2"},
+            "JAX_PROCESS_ID=2 is out of range for JAX_NUM_PROCESSES=2 (ids are 0..1)",
+        ),
+        (
+            {**JAX3, "JAX_PROCESS_ID": "-1"},
+            "JAX_PROCESS_ID=-1 is out of range for JAX_NUM_PROCESSES=2 (ids are 0..1)",
+        ),
+        (
+            {**JAX3, "JAX_NUM_PROCESSES": "0", "JAX_PROCESS_ID": "0"},
+            "JAX_NUM_PROCESSES=0: the process count must be >= 1",
+        ),
+        ({**JAX3, "JAX_PROCESS_ID": "one"}, "JAX_PROCESS_ID='one' is not an integer"),
+        (
+            {"JAX_COORDINATOR_ADDRESS": "host0:1234", "JAX_PROCESS_ID": "0"},
+            "JAX_NUM_PROCESSES not set (JAX_COORDINATOR_ADDRESS=host0:1234, JAX_PROCESS_ID=0): "
+            "set all of JAX_COORDINATOR_ADDRESS, JAX_NUM_PROCESSES, JAX_PROCESS_ID to run "
+            "several processes, or none for one",
+        ),
+        (
+            {**JAX3, "JAX_COORDINATOR_ADDRESS": "host0"},
+            "JAX_COORDINATOR_ADDRESS='host0' is not host:port (e.g. host0:1234, the address of "
+            "process 0)",
+        ),
+        (
+            {**SLURM, "SLURM_PROCID": "4"},
+            "SLURM_PROCID=4 is out of range for SLURM_NTASKS=4 (ids are 0..3)",
+        ),
+        (
+            {**SLURM, "JAX_PROCESS_ID": "5"},
+            "JAX_PROCESS_ID=5 is out of range for SLURM_NTASKS=4 (ids are 0..3)",
+        ),
+    ],
+)
+def test_parse_env_bad_setup_is_one_line_naming_the_values(environ, message):
+    with pytest.raises(ValueError) as e:
+        distributed.parse_env(environ)
+    assert str(e.value) == message
+
+
+def test_check_num_envs_names_the_global_device_count():
+    distributed.check_num_envs(16, 2, 4, 2)  # 16 envs = 4 devices x 2 minibatches x 2 envs
+    with pytest.raises(ValueError) as e:
+        distributed.check_num_envs(12, 2, 4, 2)
+    assert str(e.value) == (
+        "ppo.num_envs=12 is not divisible by ppo.num_minibatches * devices = 2 * 4 (4 device(s) "
+        "over 2 processes); each device steps num_envs / devices envs in whole minibatches"
+    )
+    with pytest.raises(ValueError, match=r"= 2 \* 3 \(3 device\(s\)\);"):
+        distributed.check_num_envs(8, 2, 3)
+
+
+def test_train_py_bad_setup_fails_in_one_line_before_jax(tmp_path):
+    """train.py reads the setup first: a process id out of range, or several processes without a
+    shared --run_dir, is one error line, before JAX is even imported (a `jax` package that fails
+    on import comes first on the path) and before any run folder is written."""
+    fake = tmp_path / "fake" / "jax"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("raise ImportError('jax imported before the setup check')")
+    path = os.pathsep.join([str(fake.parent), ROOT, os.environ.get("PYTHONPATH", "")])
+    train = [sys.executable, "train.py", "--config", "configs/smoke.py"]
+    root = f"--config.train.run_root={tmp_path / 'runs'}"
+    r = subprocess.run(
+        [*train, root, "--run_dir", str(tmp_path / "run")],
+        cwd=ROOT,
+        env=_env(**{**JAX3, "JAX_PROCESS_ID": "2"}, PYTHONPATH=path),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode != 0
+    assert r.stderr.strip().splitlines() == [
+        "error: JAX_PROCESS_ID=2 is out of range for JAX_NUM_PROCESSES=2 (ids are 0..1)"
+    ]
+    r = subprocess.run(
+        [*train, root],
+        cwd=ROOT,
+        env=_env(**JAX3, PYTHONPATH=path),
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode != 0
+    assert r.stderr.strip().splitlines() == [
+        "error: 2 processes (env) write one run: give them the same --run_dir (a folder every "
+        "process can see)"
+    ]
+    assert not os.path.exists(tmp_path / "run") and not os.path.exists(tmp_path / "runs")
+
+
+# ------------------------------------------------------------------- sharded = unsharded update
+def _update_tolerance(one, name: str, lr: float) -> float:
+    """atol of the leaf `name` (see test_sharded_update_equals_unsharded)."""
+    n = w.UPDATE_ENVS * w.UPDATE_STEPS  # terms of every batch mean
+    steps = w.update_cfg().ppo.num_epochs  # one minibatch per epoch
+    scale = float(np.max(np.abs(one))) if one.size else 0.0
+    if name.startswith("[0]"):  # params
+        return steps * (2 * U * scale + 2 * n * U * lr)
+    if ".nu" in name:  # Adam's second moment, ~ g^2
+        return 2 * n * U * scale
+    if name.startswith("[3]"):  # metrics: losses are means of O(1) terms
+        return n * U * max(scale, 1.0)
+    return n * U * scale  # gradients (Adam's first moment), normalizer, counts
+
+
+def test_sharded_update_equals_unsharded(tmp_path):
+    """The same rollout batch (16 envs x 8 steps of the memory task, episodes of 3 steps) updated
+    on 1 device and split over 2 (8 envs each) gives the same gradients and new params.
+
+    One minibatch per epoch (3 epochs): every SGD step then reads all local envs, so each device
+    computes the gradient of the mean over its half and `pmean` makes the mean over all; only the
+    order of the float32 sums differs (the shuffle permutes envs inside a mean). Tolerance, per
+    leaf, from that order: a sum of n = 16 x 8 = 128 (time, env) terms summed in another order
+    moves by at most about n u sum|terms| (Higham, Accuracy and Stability, ch. 4), u = 2^-24:
+    - gradients (Adam's first moment, and the normalizer): n u max|leaf| = 7.6e-6 max|leaf|;
+      Adam's second moment (~ g^2) twice that;
+    - losses, KL and grad norm (means of O(1) terms: unit-variance advantages, ratio ~ 1):
+      n u max(|x|, 1);
+    - params after K = 3 Adam steps: each step lr m/sqrt(v) is scale-free in g, so a relative
+      gradient error n u moves it by <= 2 n u lr, and the subtraction rounds by <= 2 u |p|
+      (an ulp): K (2 u max|p| + 2 n u lr).
+    Measured on a 2-core x86 CPU: every leaf within 1/5 of its tolerance (params ~1e-7, 1 ulp).
+    The params must also have moved by far more than the tolerance (the update did something).
+    """
+    out = tmp_path / "update.npz"
+    r = subprocess.run(
+        [sys.executable, WORKER, "update", str(out)],
+        cwd=ROOT,
+        env=_env(devices=2),
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert r.returncode == 0, r.stderr[-3000:]
+    d = np.load(out)
+    assert d["devices"].tolist() == [1, 2]
+    lr = float(np.max(d["one[3]['ppo/learning_rate_mean']"]))
+    names = [k[len("one") :] for k in d if k.startswith("one")]
+    assert len(names) > 50
+    bad = []
+    for name in names:
+        one, split = d["one" + name], d["split" + name]
+        atol = _update_tolerance(one, name, lr)
+        err = float(np.max(np.abs(one - split))) if one.size else 0.0
+        if not err <= atol:
+            bad.append(f"{name}: |1 device - 2 devices| = {err:.3g} > {atol:.3g}")
+    assert not bad, "\n".join(bad)
+    moved = [
+        float(np.max(np.abs(d["one" + n] - d["before" + n])))
+        for n in names
+        if n.startswith("[0]") and "lstm_0']['if']" not in n  # the forget gate's input rows: 0
+    ]
+    params_tol = max(_update_tolerance(d["one" + n], n, lr) for n in names if n.startswith("[0]"))
+    assert min(moved) > 100 * params_tol, (min(moved), params_tol)
+
+
+# -------------------------------------------------- 2 processes x 1 device = 1 process x 2 devices
+def _metrics(run_dir) -> list[dict]:
+    """metrics.csv rows without the wall-clock columns."""
+    with open(os.path.join(run_dir, "metrics.csv")) as f:
+        rows = list(csv.DictReader(f))
+    return [
+        {k: v for k, v in r.items() if not k.startswith(("time/", "training/sps"))} for r in rows
+    ]
+
+
+def _ok(r: subprocess.CompletedProcess) -> str:
+    assert r.returncode == 0, (r.stdout[-2000:], r.stderr[-4000:])
+    return r.stdout
+
+
+@pytest.mark.slow
+def test_two_processes_equal_two_devices_and_resume(tmp_path):  # ~2.5 min on a busy 2-core CPU
+    """The tiny toy config (8 envs x 4 steps) for 5 iterations: 1 process x 2 devices straight
+    through, against 2 processes x 1 device on localhost (jax.distributed, gloo CPU collectives)
+    for 3 iterations into one run folder, then resumed by 2 new processes to 5. Both meshes hold
+    2 devices and device i draws fold_in(key, i), so the streams match; an all-reduce over 2
+    values, (a + b) / 2, rounds the same in either order, so metrics (wall clock aside), params,
+    Adam state and normalizer must be bit-identical; every checkpoint of the 2-process run reads
+    back (its integrity record, written by process 0, matches its files)."""
+    from foottof.ppo import checkpoint as ckpt
+
+    one = tmp_path / "one_process"
+    _ok(
+        subprocess.run(
+            [sys.executable, WORKER, "run", str(one), "5"],
+            cwd=ROOT,
+            env=_env(devices=2),
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+    )
+    two = tmp_path / "two_processes"
+    for mode, n in (("run", "3"), ("resume", "5")):
+        results = _processes([sys.executable, WORKER, mode, str(two), n], 2, timeout=600)
+        for r in results:
+            _ok(r)
+        assert "2 process(es), 2 devices" in results[1].stdout
+    assert "[runner] resumed from iteration 3" in results[0].stdout
+    assert "it 5/5" in results[0].stdout and "it 5/5" not in results[1].stdout  # process 0 logs
+
+    assert [r["iteration"] for r in _metrics(two)] == ["1", "2", "3", "4", "5"]
+    assert _metrics(two) == _metrics(one)
+    a, b = np.load(one / "final.npz"), np.load(two / "final.npz")
+    assert sorted(a) == sorted(b) and len(a) > 50
+    assert all(np.array_equal(a[k], b[k]) for k in a), [
+        k for k in a if not np.array_equal(a[k], b[k])
+    ]
+    checkpoints = two / "checkpoints"
+    assert sorted(os.listdir(checkpoints)) == ["1", "2", "3", "4", "5"]
+    for step in range(1, 6):
+        assert (checkpoints / str(step) / ckpt.INTEGRITY_FILE).exists(), step
+        assert ckpt.integrity_problem(str(checkpoints / str(step))) is None, step
+
+
+@pytest.mark.slow
+def test_train_py_two_processes_check_envs_against_all_devices(tmp_path):  # ~6 s
+    """train.py in 2 processes x 1 device: the distributed runtime starts (the error counts both
+    processes' devices) and 6 envs in 2 minibatches do not split over 2 devices: one line on
+    each process, before the env is built or anything compiles."""
+    cmd = [sys.executable, "train.py", "--config", "configs/smoke.py", "--config.ppo.num_envs=6"]
+    results = _processes([*cmd, "--run_dir", str(tmp_path / "run")], 2, timeout=300)
+    for r in results:
+        assert r.returncode != 0
+        assert r.stderr.strip().splitlines()[-1] == (
+            "error: ppo.num_envs=6 is not divisible by ppo.num_minibatches * devices = 2 * 2 "
+            "(2 device(s) over 2 processes); each device steps num_envs / devices envs in whole "
+            "minibatches"
+        )
+    assert not os.path.exists(tmp_path / "run")

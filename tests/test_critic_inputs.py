@@ -104,3 +104,15 @@ def test_init_from_a_run_without_the_scan_keeps_its_value_function():
     obs_bad = {**obs_old, "state": jp.zeros((1, ACTOR_OBS + 3))}
     with pytest.raises(ValueError, match=r"memory_a"):
         ckpt.load_params_and_normalizer(FLAT_POLICY, nets.init_params(key, obs_bad), norm(obs_bad))
+    # ... unless asked (init_from into env.actor_terrain, a teacher from a sensor-only policy):
+    # the 153 terrain inputs start with zero weight, so the actor acts as the saved one whatever
+    # they read.
+    obs_t = {**obs_old, "state": jp.zeros((1, ACTOR_OBS + 153))}
+    p_t, n_t = ckpt.load_params_and_normalizer(
+        FLAT_POLICY, nets.init_params(key, obs_t), norm(obs_t), grow_actor=True
+    )
+    terrain = jp.asarray(rng.uniform(-1, 1, size=(5, 153)), jp.float32)
+    obs = {"state": jp.concatenate([a, terrain], axis=-1), "privileged_state": c}
+    _, mean_t, _, v_t = nets.step(p_t, n_t, carry, obs, reset)
+    np.testing.assert_array_equal(np.asarray(mean_t), np.asarray(mean_old))
+    np.testing.assert_array_equal(np.asarray(n_t.std["state"][ACTOR_OBS:]), 1.0)

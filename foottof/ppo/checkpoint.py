@@ -410,12 +410,15 @@ _INPUT_LEAVES = (
     "['critic']['dense_0']['kernel']",  # the critic head's first layer (mlp policy, obs_skip)
     "['actor']['dense_0']['kernel']",  # the actor head's first layer (mlp policy, obs_skip)
     "['privileged_state']",  # normalizer mean / std / summed_variance
-    # the actor's inputs, grown by env.actor_terrain (a teacher from a sensor-only policy)
+)
+# The actor's inputs: grown only on request (init_from into env.actor_terrain, a teacher started
+# from a sensor-only policy); anywhere else an actor of another layout is an error.
+_ACTOR_INPUT_LEAVES = (
     "['memory_a']['lstm_0']['ii']['kernel']",
     "['memory_a']['lstm_0']['if']['kernel']",
     "['memory_a']['lstm_0']['ig']['kernel']",
     "['memory_a']['lstm_0']['io']['kernel']",
-    "['state']",  # normalizer
+    "['state']",  # normalizer mean / std / summed_variance
 )
 _GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, not 'rollout'
 
@@ -453,9 +456,11 @@ def _grow_tree(tree: Any, target: Any, grown: dict[str, tuple]) -> Any:
     )
 
 
-def _grown_leaves(saved_manifest: list, target: Any) -> dict[str, tuple]:
-    """{leaf name: saved shape} of input leaves (_INPUT_LEAVES) the checkpoint holds with fewer
-    inputs (a shorter first axis, the rest equal) than `target`."""
+def _grown_leaves(saved_manifest: list, target: Any, actor: bool = False) -> dict[str, tuple]:
+    """{leaf name: saved shape} of input leaves (_INPUT_LEAVES, and _ACTOR_INPUT_LEAVES if
+    ``actor``) the checkpoint holds with fewer inputs (a shorter first axis, the rest equal) than
+    `target`."""
+    leaves = _INPUT_LEAVES + (_ACTOR_INPUT_LEAVES if actor else ())
     saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
     out = {}
     for path, x in jax.tree_util.tree_flatten_with_path(target)[0]:
@@ -463,7 +468,7 @@ def _grown_leaves(saved_manifest: list, target: Any) -> dict[str, tuple]:
         old, new = saved.get(name), tuple(np.shape(x))
         if (
             old is not None
-            and any(k in name for k in _INPUT_LEAVES)
+            and any(k in name for k in leaves)
             and len(old) == len(new) >= 1
             and old[0] < new[0]
             and old[1:] == new[1:]
@@ -486,7 +491,7 @@ def _grow(name: str, value: Any, shape: tuple, count: float) -> np.ndarray:
 
 
 def load_params_and_normalizer(
-    path: str, params: Any, normalizer: Any, grow: bool = True
+    path: str, params: Any, normalizer: Any, grow: bool = True, grow_actor: bool = False
 ) -> tuple[Any, Any]:
     """Params + normalizer of another run (init_from), shaped like `params`/`normalizer`.
 
@@ -500,6 +505,7 @@ def load_params_and_normalizer(
       params, normalizer: the current model's (initialized) values; give structure and sharding.
       grow: grow input leaves the saved network has fewer of (init_from); False: every leaf must
         match (a teacher, whose inputs must be the env's).
+      grow_actor: also grow the actor's inputs (init_from into env.actor_terrain).
 
     Raises:
       FileNotFoundError if there is no checkpoint there; CheckpointUnreadable (one line: path
@@ -538,7 +544,7 @@ def load_params_and_normalizer(
         for item, sub in target.items():
             if item not in manifest:
                 raise CheckpointUnreadable(f"{step_dir}: the checkpoint has no {item!r} item")
-            grown[item] = _grown_leaves(manifest[item], sub) if grow else {}
+            grown[item] = _grown_leaves(manifest[item], sub, grow_actor) if grow else {}
             saved_like[item] = _shaped_as_saved(sub, grown[item])
             check_compatible(
                 item, manifest[item], saved_like[item], f"init_from {directory}/{step}"

@@ -330,7 +330,11 @@ def _run(
     elif init_from:
         try:
             params, normalizer = ckpt.load_params_and_normalizer(
-                init_from, state.params, state.normalizer
+                init_from,
+                state.params,
+                state.normalizer,
+                # a teacher (env.actor_terrain) may start from a sensor-only policy
+                grow_actor=bool(cfg.get("env", {}).get("actor_terrain", False)),
             )
         except ckpt.CheckpointUnreadable as e:
             checkpointer.close()

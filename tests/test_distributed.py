@@ -162,26 +162,23 @@ def test_train_py_bad_setup_fails_in_one_line_before_jax(tmp_path):
     path = os.pathsep.join([str(fake.parent), ROOT, os.environ.get("PYTHONPATH", "")])
     train = [sys.executable, "train.py", "--config", "configs/smoke.py"]
     root = f"--config.train.run_root={tmp_path / 'runs'}"
-    r = subprocess.run(
-        [*train, root, "--run_dir", str(tmp_path / "run")],
-        cwd=ROOT,
-        env=_env(**{**JAX3, "JAX_PROCESS_ID": "2"}, PYTHONPATH=path),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+
+    def run(args, **variables):
+        return subprocess.run(
+            [*train, root, *args],
+            cwd=ROOT,
+            env=_env(**variables, PYTHONPATH=path),
+            capture_output=True,
+            text=True,
+            timeout=120,
+        )
+
+    r = run(["--run_dir", str(tmp_path / "run")], **{**JAX3, "JAX_PROCESS_ID": "2"})
     assert r.returncode != 0
     assert r.stderr.strip().splitlines() == [
         "error: JAX_PROCESS_ID=2 is out of range for JAX_NUM_PROCESSES=2 (ids are 0..1)"
     ]
-    r = subprocess.run(
-        [*train, root],
-        cwd=ROOT,
-        env=_env(**JAX3, PYTHONPATH=path),
-        capture_output=True,
-        text=True,
-        timeout=120,
-    )
+    r = run([], **JAX3)
     assert r.returncode != 0
     assert r.stderr.strip().splitlines() == [
         "error: 2 processes (env) write one run: give them the same --run_dir (a folder every "

@@ -10,6 +10,7 @@ python tests/multidevice_worker.py MODE OUT.
                           foottof.ppo.distributed.initialize() (with JAX_* variables: one of
                           several processes); process 0 writes OUT_DIR/final.npz (params,
                           opt_state, normalizer)
+  collectives             all-gathers over all processes until stopped (with JAX_* variables)
 """
 
 import os
@@ -119,10 +120,27 @@ def run(out_dir: str, iterations: str = "3", resume: bool = False) -> None:
         )
 
 
+def collectives() -> None:
+    """All-gathers over all processes, 10 a second, until stopped (a hung process's test)."""
+    from foottof.ppo import distributed
+
+    distributed.initialize()
+    import itertools
+    import time
+
+    from jax.experimental import multihost_utils
+
+    for i in itertools.count():
+        multihost_utils.sync_global_devices(f"beat {i}")  # an all-gather of every process
+        if i == 0:
+            print("[worker] collectives running", flush=True)
+        time.sleep(0.1)
+
+
 if __name__ == "__main__":
     sys.path[:0] = [os.path.dirname(TESTS), TESTS]  # the repo (configs, foottof) and helpers
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "resume":
         run(*args, resume=True)
     else:
-        {"update": update, "run": run}[mode](*args)
+        {"update": update, "run": run, "collectives": collectives}[mode](*args)

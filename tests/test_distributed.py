@@ -9,9 +9,11 @@ device count and the distributed runtime are fixed when JAX starts.
 
 import csv
 import os
+import signal
 import socket
 import subprocess
 import sys
+import time
 
 import multidevice_worker as w
 import numpy as np
@@ -45,10 +47,10 @@ def _free_port() -> int:
         return s.getsockname()[1]
 
 
-def _processes(cmd: list[str], n: int, timeout: int, **extra) -> list[subprocess.CompletedProcess]:
-    """`cmd` as processes 0..n-1 of one distributed run on localhost; their finished results."""
+def _start(cmd: list[str], n: int, **extra) -> list[subprocess.Popen]:
+    """`cmd` started as processes 0..n-1 of one distributed run on localhost."""
     address = f"localhost:{_free_port()}"
-    procs = [
+    return [
         subprocess.Popen(
             cmd,
             cwd=ROOT,
@@ -64,11 +66,16 @@ def _processes(cmd: list[str], n: int, timeout: int, **extra) -> list[subprocess
         )
         for i in range(n)
     ]
-    out = []
-    for p in procs:
-        stdout, stderr = p.communicate(timeout=timeout)
-        out.append(subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr))
-    return out
+
+
+def _finish(p: subprocess.Popen, timeout: float) -> subprocess.CompletedProcess:
+    stdout, stderr = p.communicate(timeout=timeout)
+    return subprocess.CompletedProcess(p.args, p.returncode, stdout, stderr)
+
+
+def _processes(cmd: list[str], n: int, timeout: int, **extra) -> list[subprocess.CompletedProcess]:
+    """`cmd` as processes 0..n-1 of one distributed run on localhost; their finished results."""
+    return [_finish(p, timeout) for p in _start(cmd, n, **extra)]
 
 
 # ------------------------------------------------------------------------ setup from env vars
@@ -85,11 +92,14 @@ SLURM = {
 def test_parse_env_reads_the_jax_and_slurm_variables():
     assert distributed.parse_env({}) is None  # one process: nothing starts
     assert distributed.parse_env({"HOME": "/root", "JAX_PLATFORMS": "cpu"}) is None
-    assert distributed.parse_env(JAX3) == ("host0:1234", 2, 1, "env")
+    beat = distributed.HEARTBEAT_TIMEOUT_S
+    assert distributed.parse_env(JAX3) == ("host0:1234", 2, 1, "env", beat)
     # A SLURM step of 4 tasks: count and id from SLURM, the address left to JAX (nodelist).
-    assert distributed.parse_env(SLURM) == (None, 4, 3, "slurm")
+    assert distributed.parse_env(SLURM) == (None, 4, 3, "slurm", beat)
     over = {**SLURM, "JAX_COORDINATOR_ADDRESS": "node001:5555"}
-    assert distributed.parse_env(over) == ("node001:5555", 4, 3, "slurm")
+    assert distributed.parse_env(over) == ("node001:5555", 4, 3, "slurm", beat)
+    fast = {**JAX3, "FOOTTOF_HEARTBEAT_TIMEOUT_S": "10"}
+    assert distributed.parse_env(fast) == ("host0:1234", 2, 1, "env", 10)
     # A SLURM job of one task (sbatch, salloc shell) stays one process with all its GPUs.
     one = {**SLURM, "SLURM_NTASKS": "1", "SLURM_PROCID": "0", "SLURM_LOCALID": "0"}
     assert distributed.parse_env(one) is None
@@ -131,6 +141,14 @@ def test_parse_env_reads_the_jax_and_slurm_variables():
         (
             {**SLURM, "JAX_PROCESS_ID": "5"},
             "JAX_PROCESS_ID=5 is out of range for SLURM_NTASKS=4 (ids are 0..3)",
+        ),
+        (
+            {**JAX3, "FOOTTOF_HEARTBEAT_TIMEOUT_S": "0"},
+            "FOOTTOF_HEARTBEAT_TIMEOUT_S=0: the heartbeat timeout must be >= 1 s",
+        ),
+        (
+            {**JAX3, "FOOTTOF_HEARTBEAT_TIMEOUT_S": "1m"},
+            "FOOTTOF_HEARTBEAT_TIMEOUT_S='1m' is not an integer",
         ),
     ],
 )
@@ -328,3 +346,28 @@ def test_train_py_two_processes_check_envs_against_all_devices(tmp_path):  # ~6 
             "minibatches"
         )
     assert not os.path.exists(tmp_path / "run")
+
+
+@pytest.mark.slow
+def test_hung_process_ends_the_others_within_the_heartbeat_timeout():  # ~20 s
+    """A process that stops (SIGSTOP: its sockets stay open, so no collective fails; as a host
+    that vanished, or a hang) is noticed by the heartbeat, here FOOTTOF_HEARTBEAT_TIMEOUT_S=5 s
+    (JAX's default 100 s): process 0, blocked in an all-gather, is ended by JAX's abort (its own
+    message and stack dump; no Python hook can run) within the timeout."""
+    procs = _start([sys.executable, WORKER, "collectives"], 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="5")
+    try:
+        for line in procs[0].stdout:  # until the first all-gather is done (gloo says hello first)
+            if line.startswith("[worker] collectives running"):
+                break
+        else:
+            raise AssertionError(_finish(procs[0], 30).stderr[-3000:])
+        procs[1].send_signal(signal.SIGSTOP)
+        stopped = time.time()
+        r = _finish(procs[0], timeout=60)
+        stop_s = time.time() - stopped
+    finally:
+        for p in procs:
+            p.kill()
+            p.communicate()
+    assert r.returncode != 0 and "heartbeat" in r.stderr, (r.returncode, r.stderr[-3000:])
+    assert stop_s < 15, stop_s  # measured: 5.0 and 5.9 s; JAX's default would be 100 s

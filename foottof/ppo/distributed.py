@@ -10,6 +10,8 @@ Which variables start it (read by `parse_env`, which imports no JAX):
 A SLURM job of one task (`sbatch` / `salloc` shells) stays a single process with all its GPUs: JAX's
 own detection would start the runtime there and keep one GPU only, so we do not call it.
 `JAX_LOCAL_DEVICE_IDS` is read by JAX itself. Without these variables nothing changes.
+`FOOTTOF_HEARTBEAT_TIMEOUT_S` (optional): after how many seconds of silence a process counts as
+dead (HEARTBEAT_TIMEOUT_S).
 """
 
 import os
@@ -25,6 +27,14 @@ SLURM_VARS = (
     "SLURM_LOCALID",
 )
 
+# A process that stops sending heartbeats to the coordination service (on process 0) for this
+# long counts as dead, and JAX then aborts every other process (JAX's default: 100 s). This bounds
+# the wait where no collective notices the loss first: a host gone without closing its sockets, a
+# process hung, or one waiting in a barrier instead of a collective. Override with the
+# variable HEARTBEAT_VAR (seconds).
+HEARTBEAT_TIMEOUT_S = 60
+HEARTBEAT_VAR = "FOOTTOF_HEARTBEAT_TIMEOUT_S"
+
 
 class Setup(NamedTuple):
     """What `jax.distributed.initialize` is called with."""
@@ -33,6 +43,7 @@ class Setup(NamedTuple):
     num_processes: int
     process_id: int  # 0..num_processes-1
     source: str  # 'env' (JAX_* variables) or 'slurm'
+    heartbeat_timeout_s: int = HEARTBEAT_TIMEOUT_S  # a process silent this long is dead
 
 
 def _int(environ: Mapping[str, str], name: str) -> int:
@@ -62,7 +73,7 @@ def parse_env(environ: Mapping[str, str] | None = None) -> Setup | None:
     Raises:
       ValueError: one line naming the variables and values: some JAX_* variables set but not all
         (outside a SLURM step), a value that is not an integer, a process count < 1, a process
-        id outside 0..count-1, an address without a numeric port.
+        id outside 0..count-1, an address without a numeric port, a heartbeat timeout < 1 s.
     """
     environ = os.environ if environ is None else environ
     given = {v: environ[v] for v in JAX_VARS if environ.get(v)}
@@ -101,7 +112,10 @@ def parse_env(environ: Mapping[str, str] | None = None) -> Setup | None:
                 f"JAX_COORDINATOR_ADDRESS={address!r} is not host:port (e.g. host0:1234, the "
                 f"address of process 0)"
             )
-    return Setup(address, num, pid, source)
+    heartbeat_s = _int(environ, HEARTBEAT_VAR) if environ.get(HEARTBEAT_VAR) else None
+    if heartbeat_s is not None and heartbeat_s < 1:
+        raise ValueError(f"{HEARTBEAT_VAR}={heartbeat_s}: the heartbeat timeout must be >= 1 s")
+    return Setup(address, num, pid, source, heartbeat_s or HEARTBEAT_TIMEOUT_S)
 
 
 def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
@@ -109,6 +123,7 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
 
     Call it before any other JAX call (it must come before the backend starts). CPU processes
     talk through gloo collectives. Blocks until all processes have joined (JAX's timeout, 5 min).
+    A process silent for Setup.heartbeat_timeout_s counts as dead (HEARTBEAT_TIMEOUT_S).
 
     Returns:
       The Setup, or None for a single process (nothing was started).
@@ -127,6 +142,7 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
         coordinator_address=setup.coordinator_address,
         num_processes=setup.num_processes,
         process_id=setup.process_id,
+        heartbeat_timeout_seconds=setup.heartbeat_timeout_s,
     )
     if jax.process_count() != setup.num_processes:
         raise ValueError(

@@ -98,6 +98,8 @@ def main(argv):
         CheckpointUnreadable,
     ) as e:
         sys.exit(f"error: {e}")
+    except distributed.ProcessLost as e:  # another process died: stop now, without waiting for it
+        distributed.exit_at_once(str(e))
     config_file = config_flags.get_config_filename(flags.FLAGS["config"])
     print(
         f"[train] done: {run_dir}. Evaluate: python evaluate.py --checkpoint {run_dir}; train "

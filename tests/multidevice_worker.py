@@ -5,11 +5,12 @@ python tests/multidevice_worker.py MODE OUT.
 
   update OUT.npz  the PPO update of one rollout batch on 1 device and split over all devices
                   (start with XLA_FLAGS=--xla_force_host_platform_device_count=2)
-  run OUT_DIR [N]         N (default 3) iterations of the tiny toy config through runner.run in
-  resume OUT_DIR N        OUT_DIR (resume: continue its run to N), after
-                          foottof.ppo.distributed.initialize() (with JAX_* variables: one of
-                          several processes); process 0 writes OUT_DIR/final.npz (params,
-                          opt_state, normalizer)
+  run OUT_DIR [N [K]]      N (default 3) iterations of the tiny toy config through runner.run in
+  resume OUT_DIR N [K]    OUT_DIR (resume: continue its run to N), a checkpoint every K (default
+                          1), after foottof.ppo.distributed.initialize() (with JAX_* variables:
+                          one of several processes); process 0 writes OUT_DIR/final.npz (params,
+                          opt_state, normalizer); another process lost: train.py's one line and
+                          exit status
   collectives             all-gathers over all processes until stopped (with JAX_* variables)
 """
 
@@ -98,7 +99,7 @@ def update(out: str) -> None:
     np.savez(out, **arrays)
 
 
-def run(out_dir: str, iterations: str = "3", resume: bool = False) -> None:
+def run(out_dir: str, iterations: str = "3", every: str = "1", resume: bool = False) -> None:
     from foottof.ppo import distributed  # imports no JAX
 
     setup = distributed.initialize()  # before any other JAX call
@@ -108,8 +109,11 @@ def run(out_dir: str, iterations: str = "3", resume: bool = False) -> None:
 
     from foottof.ppo import runner, toy_envs
 
-    cfg = tiny_cfg(num_iterations=int(iterations), checkpoint_every=1, tensorboard=False)
-    state = runner.run(cfg, toy_envs.make_memory_env(), out_dir, resume=resume)
+    cfg = tiny_cfg(num_iterations=int(iterations), checkpoint_every=int(every), tensorboard=False)
+    try:
+        state = runner.run(cfg, toy_envs.make_memory_env(), out_dir, resume=resume)
+    except distributed.ProcessLost as e:  # as train.py
+        distributed.exit_at_once(str(e))
     print(
         f"[worker] setup {setup}, {jax.process_count()} process(es), {jax.device_count()} devices"
     )

@@ -9,6 +9,8 @@ device count and the distributed runtime are fixed when JAX starts.
 
 import csv
 import os
+import re
+import shutil
 import signal
 import socket
 import subprocess
@@ -205,6 +207,39 @@ def test_train_py_bad_setup_fails_in_one_line_before_jax(tmp_path):
     assert not os.path.exists(tmp_path / "run") and not os.path.exists(tmp_path / "runs")
 
 
+# ------------------------------------------------------------------------ a process dies
+GLOO_RESET = (  # what process 0 caught when process 1 was killed (jaxlib 0.10.2, CPU)
+    "UNKNOWN: Gloo all-reduce failed: [external/gloo/gloo/transport/tcp/pair.cc:538] Read error "
+    "[127.0.0.1]:42731: Connection reset by peer"
+)
+
+
+def test_lost_process_message_names_the_process_and_the_checkpoint():
+    e = RuntimeError(GLOO_RESET + "\nsecond line")
+    assert distributed.lost_process_message(e, 0, 2, 7, "/runs/a", 6) == (
+        f"[distributed] process 1 of 2 stopped responding after iteration 7 ({GLOO_RESET}); "
+        "process 0 stops. Resume: start all 2 again with --resume --run_dir /runs/a; they "
+        "continue from iteration 6, the last complete checkpoint"
+    )
+    line = distributed.lost_process_message(RuntimeError("x" * 500), 3, 8, 0, "/runs/b", None)
+    assert line == (
+        f"[distributed] another of the 8 processes stopped responding after iteration 0 "
+        f"({'x' * 197}...); process 3 stops. No checkpoint is complete: start all of them again "
+        "without --resume"
+    )
+
+
+def test_only_communication_errors_count_as_a_lost_process():
+    assert distributed.is_lost_process(RuntimeError(GLOO_RESET))
+    assert distributed.is_lost_process(
+        RuntimeError("UNAVAILABLE: Task 1 heartbeat timeout. This indicates that the remote task")
+    )
+    assert not distributed.is_lost_process(
+        RuntimeError("RESOURCE_EXHAUSTED: Out of memory while trying to allocate 1.2GiB")
+    )
+    assert not distributed.is_lost_process(RuntimeError("INVALID_ARGUMENT: shape mismatch"))
+
+
 # ------------------------------------------------------------------- sharded = unsharded update
 def _update_tolerance(one, name: str, lr: float) -> float:
     """atol of the leaf `name` (see test_sharded_update_equals_unsharded)."""
@@ -346,6 +381,101 @@ def test_train_py_two_processes_check_envs_against_all_devices(tmp_path):  # ~6 
             "minibatches"
         )
     assert not os.path.exists(tmp_path / "run")
+
+
+def _wait_until(done, procs: list[subprocess.Popen], timeout: float, what: str) -> None:
+    """Waits until `done()` while every process of `procs` runs."""
+    deadline = time.time() + timeout
+    while not done():
+        for i, p in enumerate(procs):
+            if p.poll() is not None:
+                r = _finish(p, 10)
+                raise AssertionError(
+                    f"process {i} ended first ({r.returncode}): {r.stderr[-3000:]}"
+                )
+        assert time.time() < deadline, f"no {what} after {timeout} s"
+        time.sleep(0.1)
+
+
+def _logged(run_dir, iteration: int) -> bool:
+    """Whether process 0 has written the metrics row of `iteration`."""
+    path = os.path.join(run_dir, "metrics.csv")
+    return os.path.exists(path) and any(r["iteration"] == str(iteration) for r in _metrics(run_dir))
+
+
+LOST_LINE = re.compile(
+    r"\[distributed\] process 1 of 2 stopped responding after iteration (\d+) \((.+)\); process 0 "
+    r"stops\. Resume: start all 2 again with --resume --run_dir (\S+); they continue from "
+    r"iteration (\d+), the last complete checkpoint"
+)
+
+
+@pytest.mark.slow
+def test_killed_process_stops_the_run_and_a_resume_continues(tmp_path):  # ~1 min, busy 2 cores
+    """2 processes x 1 device on localhost, a checkpoint every 4 iterations. Once checkpoint 4 is
+    complete (process 0 has written its integrity record, after orbax renamed the folder) and
+    iteration 5 is logged, process 1 is killed (SIGKILL). Process 0 must stop within seconds
+    (its next collective fails at once; the heartbeat timeout, 10 s here, bounds every other
+    wait), with one line on stderr naming process 1 and checkpoint 4, and status
+    EXIT_PROCESS_LOST: not a traceback, nor JAX's abort at the heartbeat timeout. It can have
+    finished iterations 5 to 7 (each needs both processes), so the rows after the checkpoint
+    must go. A half-written checkpoint (what a kill during a save leaves, planted newer than
+    all) is never read: 2 new processes with --resume continue from iteration 4, and
+    metrics.csv continues without a gap or a repeated iteration."""
+    from foottof.ppo import checkpoint as ckpt
+    from foottof.ppo import run_dir as run_dirs
+
+    run = tmp_path / "run"
+    checkpoints = run / "checkpoints"
+    cmd = [sys.executable, WORKER, "run", str(run), "1000", "4"]  # 1000 iterations: stopped early
+    procs = _start(cmd, 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="10")
+    try:
+        complete = checkpoints / "4" / ckpt.INTEGRITY_FILE
+        _wait_until(lambda: complete.exists() and _logged(run, 5), procs, 600, "iteration 5")
+        procs[1].send_signal(signal.SIGKILL)
+        killed = time.time()
+        r = _finish(procs[0], timeout=60)
+        stop_s = time.time() - killed
+    finally:
+        for p in procs:
+            p.kill()
+            p.communicate()
+    assert r.returncode == distributed.EXIT_PROCESS_LOST, (r.returncode, r.stderr[-3000:])
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and (m := LOST_LINE.fullmatch(lines[0])), r.stderr[-3000:]
+    assert stop_s < 5, stop_s  # a collective noticed it, not the heartbeat (10 s)
+    after, cause, run_dir, resumed = int(m[1]), m[2], m[3], int(m[4])
+    assert "Gloo" in cause and run_dir == str(run)
+    assert resumed == 4 and 5 <= after <= 7, (resumed, after)
+    assert run_dirs.latest_checkpoint(str(run)) == 4
+    assert sorted(s for s in os.listdir(checkpoints) if s.isdigit()) == ["4"]
+    assert ckpt.integrity_problem(str(checkpoints / "4")) is None
+    before = _metrics(run)
+    assert [int(row["iteration"]) for row in before] == list(range(1, after + 1))
+
+    end = resumed + 2
+    # What a kill during the save of `end` leaves (the name orbax 0.12.8 writes into; the kill
+    # above may have left one): newer than every complete checkpoint, every other file missing,
+    # the others cut in half.
+    half = checkpoints / f"{end}.orbax-checkpoint-tmp"
+    if not half.exists():
+        shutil.copytree(checkpoints / str(resumed), half)
+        for i, f in enumerate(sorted(p for p in half.rglob("*") if p.is_file())):
+            if i % 2:
+                f.unlink()
+            else:
+                f.write_bytes(f.read_bytes()[: f.stat().st_size // 2])
+
+    results = _processes([sys.executable, WORKER, "resume", str(run), str(end), "2"], 2, 600)
+    for res in results:
+        _ok(res)
+    assert f"[runner] resumed from iteration {resumed} in" in results[0].stdout
+    assert f"it {end}/{end}" in results[0].stdout
+    rows = _metrics(run)
+    assert [int(row["iteration"]) for row in rows] == list(range(1, end + 1))
+    assert rows[:resumed] == before[:resumed]  # the rows up to the checkpoint are kept
+    assert ckpt.integrity_problem(str(checkpoints / str(end))) is None  # written anew
+    assert not half.exists()  # orbax replaced the half-written folder
 
 
 @pytest.mark.slow

@@ -75,3 +75,15 @@ def test_a_real_folder_at_the_link_path_is_left_alone(tmp_path):
     with pytest.raises(FileExistsError):
         rd.point_latest(old, str(tmp_path / "cpu-new"))
     assert os.path.isdir(os.path.join(old, rd.CHECKPOINT_SUBDIR, "10"))
+
+
+def test_latest_checkpoint_is_the_newest_complete_one(tmp_path):
+    """Orbax writes <iteration>.orbax-checkpoint-tmp-<time> and renames it when every process has
+    written its part: a half-written checkpoint (a killed run's) is not a number and is not
+    counted, however new."""
+    assert rd.latest_checkpoint(str(tmp_path)) is None  # no checkpoints/ folder
+    _fake_run(tmp_path, step=4)
+    _fake_run(tmp_path, step=12)
+    (tmp_path / "checkpoints" / "14.orbax-checkpoint-tmp-1765000000").mkdir()
+    (tmp_path / "checkpoints" / "notes.txt").write_text("")
+    assert rd.latest_checkpoint(str(tmp_path)) == 12

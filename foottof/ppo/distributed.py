@@ -12,11 +12,15 @@ own detection would start the runtime there and keep one GPU only, so we do not 
 `JAX_LOCAL_DEVICE_IDS` is read by JAX itself. Without these variables nothing changes.
 `FOOTTOF_HEARTBEAT_TIMEOUT_S` (optional): after how many seconds of silence a process counts as
 dead (HEARTBEAT_TIMEOUT_S).
+
+When a process dies the others stop (`ProcessLost`, `lost_process_message`, `exit_at_once`): see
+README_multihost.md, "When a process dies".
 """
 
 import os
+import sys
 from collections.abc import Mapping
-from typing import NamedTuple
+from typing import NamedTuple, NoReturn
 
 JAX_VARS = ("JAX_COORDINATOR_ADDRESS", "JAX_NUM_PROCESSES", "JAX_PROCESS_ID")
 SLURM_VARS = (
@@ -30,10 +34,12 @@ SLURM_VARS = (
 # A process that stops sending heartbeats to the coordination service (on process 0) for this
 # long counts as dead, and JAX then aborts every other process (JAX's default: 100 s). This bounds
 # the wait where no collective notices the loss first: a host gone without closing its sockets, a
-# process hung, or one waiting in a barrier instead of a collective. Override with the
+# process hung, or one waiting in a barrier instead of a collective. A killed process is noticed
+# at once by the next collective (its sockets close): ProcessLost below. Override with the
 # variable HEARTBEAT_VAR (seconds).
 HEARTBEAT_TIMEOUT_S = 60
 HEARTBEAT_VAR = "FOOTTOF_HEARTBEAT_TIMEOUT_S"
+EXIT_PROCESS_LOST = 75  # exit status of a process that stopped because another died (EX_TEMPFAIL)
 
 
 class Setup(NamedTuple):
@@ -169,3 +175,80 @@ def check_num_envs(
             f"{num_minibatches} * {num_devices} ({where}); each device steps num_envs / devices "
             f"envs in whole minibatches"
         )
+
+
+class ProcessLost(RuntimeError):
+    """Another process of the run died or stopped answering; the message is one line that says
+    how to resume (`lost_process_message`)."""
+
+
+# What the runtime's errors say when another process is gone: gloo (CPU collectives: 'Gloo
+# all-reduce failed: ... Read error [127.0.0.1]:63642: Connection reset by peer'), NCCL (GPU
+# collectives), the coordination service (a missed heartbeat, a failed barrier).
+_LOST_SIGNS = (
+    "gloo",
+    "nccl",
+    "connection reset",
+    "connection closed",
+    "broken pipe",
+    "socket closed",
+    "heartbeat",
+    "barrier",
+    "unavailable:",
+)
+
+
+def is_lost_process(error: BaseException) -> bool:
+    """Whether a JAX runtime error of a multi-process run says another process is gone (a
+    collective or the coordination service failed), rather than a fault of this process."""
+    text = str(error).lower()
+    return any(sign in text for sign in _LOST_SIGNS)
+
+
+def lost_process_message(
+    error: BaseException,
+    process_id: int,
+    num_processes: int,
+    iteration: int,
+    run_dir: str,
+    checkpoint: int | None,
+) -> str:
+    """One line: which process stopped, where, what the runtime said, and how to resume.
+
+    Args:
+      error: the runtime error that noticed it (its first line is quoted).
+      process_id, num_processes: this process and the run's count.
+      iteration: the last iteration this process finished.
+      run_dir: the run folder (`--run_dir`).
+      checkpoint: the newest complete checkpoint in it (None: none).
+    """
+    if num_processes == 2:
+        other = f"process {1 - process_id} of 2"
+    else:
+        other = f"another of the {num_processes} processes"
+    cause = (str(error).strip().splitlines() or [type(error).__name__])[0]
+    cause = cause if len(cause) <= 200 else cause[:197] + "..."
+    if checkpoint is None:
+        then = "No checkpoint is complete: start all of them again without --resume"
+    else:
+        then = (
+            f"Resume: start all {num_processes} again with --resume --run_dir {run_dir}; they "
+            f"continue from iteration {checkpoint}, the last complete checkpoint"
+        )
+    return (
+        f"[distributed] {other} stopped responding after iteration {iteration} ({cause}); "
+        f"process {process_id} stops. {then}"
+    )
+
+
+def exit_at_once(message: str, status: int = EXIT_PROCESS_LOST) -> NoReturn:
+    """Prints `message` to stderr and ends this process now (os._exit).
+
+    A normal exit would run JAX's shutdown, which waits at a barrier for every process, the dead
+    one too, until the heartbeat timeout, and then aborts with a page of C++ log; orbax's and
+    TensorBoard's exit handlers have nothing left to write (checkpoints are synchronous).
+    """
+    sys.stdout.flush()
+    sys.stderr.write(message + "\n")
+    sys.stderr.flush()
+    os._exit(status)

@@ -20,6 +20,16 @@ def has_checkpoint(run_dir: str) -> bool:
     return os.path.isdir(d) and any(n.isdigit() for n in os.listdir(d))
 
 
+def latest_checkpoint(run_dir: str) -> int | None:
+    """The newest complete checkpoint's iteration in run_dir/checkpoints (None: none).
+
+    Orbax writes a checkpoint into <iteration>.orbax-checkpoint-tmp-<time> and renames it to
+    <iteration> only when every process has written its part, so a number is a complete one."""
+    d = os.path.join(run_dir, CHECKPOINT_SUBDIR)
+    steps = [int(n) for n in os.listdir(d) if n.isdigit()] if os.path.isdir(d) else []
+    return max(steps, default=None)
+
+
 def new_run_dir(run_root: str, run_name: str, now: float | None = None) -> str:
     """A path that does not exist yet: <run_root>/<run_name>-<YYYYmmdd-HHMMSS>[-<n>]."""
     stamp = time.strftime("%Y%m%d-%H%M%S", time.localtime(now))

@@ -13,6 +13,7 @@ import numpy as np
 
 from foottof import renames
 from foottof.ppo import checkpoint as ckpt
+from foottof.ppo import distributed
 from foottof.ppo import run_dir as run_dirs
 from foottof.ppo import train as train_lib
 
@@ -256,6 +257,9 @@ def run(
 
     Raises:
       NonFiniteError: a loss or parameter became NaN/inf (no checkpoint is written for it).
+      distributed.ProcessLost: another process of a multi-process run died or stopped answering
+        during training (one line naming the checkpoint to resume from); end this process with
+        distributed.exit_at_once, not a normal exit, which would wait for the dead process.
       KeyboardInterrupt: re-raised after saving a checkpoint of the last finished iteration.
     """
     cfg = _prepare_cfg(cfg)
@@ -370,6 +374,7 @@ def _run(
     it = int(state.iteration)
     last_saved = checkpointer.latest_step()
     run_start, run_start_it = time.time(), it
+    lost = None
     try:
         while it < total:
             t_it = time.time()
@@ -404,6 +409,14 @@ def _run(
                 on_iteration(it, metrics, state)
             if it % int(t.checkpoint_every) == 0 or it == total:
                 last_saved = checkpointer.save(state)
+    except Exception as e:  # a collective's failure: JaxRuntimeError, or ValueError from jit
+        if jax.process_count() == 1 or not distributed.is_lost_process(e):
+            raise
+        newest = run_dirs.latest_checkpoint(run_dir)
+        lost = distributed.lost_process_message(
+            e, jax.process_index(), jax.process_count(), it, run_dir, newest
+        )
+        raise distributed.ProcessLost(lost) from None
     except KeyboardInterrupt:
         if _alive(state) and _params_finite(state.params):
             step = int(state.iteration)
@@ -416,5 +429,6 @@ def _run(
     finally:
         if logs is not None:
             logs.close()
-        checkpointer.close()
+        if lost is None:  # after a lost process, closing could wait for it
+            checkpointer.close()
     return state

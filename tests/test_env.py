@@ -424,7 +424,7 @@ def test_guidance_weight_counts_training_steps_across_resets(env):
 def test_actor_terrain_adds_the_teachers_inputs():
     """env.actor_terrain appends the critic's foot patches (36) and the first 117 scan points
     (x <= 0.6 m) to the actor's observation; the rest is unchanged."""
-    from foottof.envs.anymal_tof import ACTOR_SCAN_POINTS, critic_scan_points
+    from foottof.envs.observations import ACTOR_SCAN_POINTS, critic_scan_points
 
     cfg = _cfg()
     cfg.env.critic_height_scan = True

@@ -167,7 +167,7 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     import ml_collections
 
     from foottof.envs import rewards
-    from foottof.envs.anymal_tof import TaskSpec
+    from foottof.envs.task_spec import TaskSpec
 
     cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
     at_default = cfg.to_dict()

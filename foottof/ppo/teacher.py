@@ -77,7 +77,7 @@ def make_distill_env(cfg):
     ``cfg.train.teacher``, and the init function cuts the student from the teacher
     (:func:`student_from_teacher`; used where the run has no train.init_from)."""
     from foottof.envs import make_training_env
-    from foottof.envs.anymal_tof import ACTOR_TERRAIN_INPUTS
+    from foottof.envs.observations import ACTOR_TERRAIN_INPUTS
 
     path = str(cfg.train.teacher)
     check_teacher_path(path)

@@ -220,3 +220,18 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     assert make_networks(12, old.network).module != make_networks(12, new.network).module
     with pytest.raises(KeyError, match="not an added field"):
         renames.added_default("terrain.num_levels")
+
+
+def test_read_added_is_the_one_fallback():
+    """renames.read_added: the section's value, else the ADDED_FIELDS default; a field that is
+    not listed is an error (its fallback would be written somewhere else)."""
+    import ml_collections
+
+    assert renames.read_added({"physics": "mjx"}, "env.physics") == "mjx"
+    assert renames.read_added({}, "env.physics") == "auto"
+    terrain = ml_collections.ConfigDict({"stretch_min_level": 4})
+    assert renames.read_added(terrain, "terrain.stretch_min_level") == 4
+    assert renames.read_added(terrain, "terrain.stretch_prob") == 0.0
+    with pytest.raises(KeyError, match="not an added field"):
+        renames.read_added({}, "env.source")
+    assert renames.HASHED_AT_DEFAULT <= set(renames.ADDED_FIELDS)

@@ -31,6 +31,7 @@ from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-expor
 from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
 from foottof.ppo import distill, losses
 from foottof.ppo import networks as net
+from foottof.renames import read_added
 
 AXIS = "data"  # mesh axis over envs (all devices of all hosts)
 
@@ -177,7 +178,7 @@ class Settings:
             value_loss_coef=float(ppo.value_loss_coef),
             entropy_coef=float(ppo.entropy_coef),
             use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
-            distilling=bool(train_cfg is not None and train_cfg.get("teacher", "")),
+            distilling=bool(train_cfg is not None and read_added(train_cfg, "train.teacher")),
         )
 
     def loss_kwargs(self) -> dict:

@@ -432,6 +432,18 @@ def _check_model_cross(m) -> None:
         )
 
 
+def _check_guidance_decay_cross(r) -> None:
+    """The guidance bias decay's order (c.reward); foottof.envs.rewards.RewardSpec runs it too."""
+    start, end = r.guidance_decay_start_iteration, r.guidance_decay_end_iteration
+    if end > 0 and not 0 <= start < end:
+        _fail(
+            "reward.guidance_decay_start_iteration",
+            start,
+            f"must be in [0, reward.guidance_decay_end_iteration={end}) when the decay is on "
+            f"(end > 0)",
+        )
+
+
 # Cross-field checks of one section by its path, with the fields they read (check_fields runs
 # them after the RULES when it is given all of those fields).
 _TILE_FIELDS = (
@@ -444,6 +456,10 @@ _TILE_FIELDS = (
     "z_range_m",
 )
 _SECTION_CROSS = {
+    "reward": (
+        ("guidance_decay_start_iteration", "guidance_decay_end_iteration"),
+        _check_guidance_decay_cross,
+    ),
     "terrain": (_TILE_FIELDS, _check_tile_cross),
     "env.model": (("timestep", "solref_timeconst"), _check_model_cross),
     "sensor": (("grid", "rate_hz", "max_range_m", "resolution_m"), _check_sensor_cross),
@@ -538,6 +554,9 @@ def _check_cross(c) -> None:
             f"must divide the control period {CONTROL_DT_S:g} s into whole physics steps",
         )
     _check_model_cross(m)
+    fields, cross = _SECTION_CROSS["reward"]
+    if all(f in c.reward for f in fields):  # a config saved before the decay has none
+        cross(c.reward)
     sat = c.env.control.get("saturation_torque")
     if sat is not None and _num(0.0, lo_open=True)(sat):
         _fail("env.control.saturation_torque", sat, "must be None or a number > 0")

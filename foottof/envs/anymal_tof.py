@@ -21,7 +21,7 @@ from foottof.envs.task_spec import TaskSpec
 from foottof.perception import check_source
 from foottof.perception.odometry import noisy_odometry
 from foottof.physics import make_physics
-from foottof.renames import added_default
+from foottof.renames import read_added
 from foottof.robot import kinematics
 from foottof.robot.model import (
     BASE_SPHERE_CENTRES_M,
@@ -124,8 +124,7 @@ class AnymalToFEnv(Env):
         terrain_map: TerrainMap | None = None,
     ):
         check_source(source, allow_all=False)
-        rw.check_scales(cfg.reward.scales)
-        self.cfg = cfg
+        self.cfg = cfg  # kept for callers; the step's phases read self.spec
         self.spec = TaskSpec.from_config(cfg)
         self.source = source
         ecfg = cfg.env
@@ -141,10 +140,10 @@ class AnymalToFEnv(Env):
         # Physics backend (env.physics: MJX or MuJoCo C); the PD gains come per step.
         drive = {k: v for k, v in dict(ecfg.control).items() if k not in ("kp", "kd")}
         self.physics = make_physics(
-            str(ecfg.get("physics", "auto")),
+            str(read_added(ecfg, "env.physics")),
             self.mj_model,
             drive,
-            int(ecfg.get("physics_threads", 0)),
+            int(read_added(ecfg, "env.physics_threads")),
         )
         self._default_q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
         self._stand_height = kinematics.nominal_base_height(
@@ -272,9 +271,9 @@ class AnymalToFEnv(Env):
         action = jp.clip(action, -sp.clip_actions, sp.clip_actions)
         q_target = self._default_q + constants.ACTION_SCALE * action
         # Push: add a random horizontal base velocity every push interval.
-        push_now = (task.step == p.push_step) & sp.randomize
+        push_now = (task.step == p.push_step) & sp.randomization.enabled
         push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
-        push = push * sp.push_vel_mps * push_now
+        push = push * sp.randomization.push_vel_mps * push_now
         d = d.replace(qvel=d.qvel.at[0:2].add(push))
         kp = sp.kp * p.kp_scale * p.motor_strength
         kd = sp.kd * p.kd_scale * p.motor_strength
@@ -294,12 +293,10 @@ class AnymalToFEnv(Env):
         (when reward.scales.foot_clearance is on) foot clearances."""
         fk, foot_vel = self._foot_kinematics(d)
         clearance = jp.zeros(4)
-        clearance_scale = self.cfg.reward.scales.get(
-            "foot_clearance", added_default("reward.scales.foot_clearance")
-        )
-        if float(clearance_scale) != 0.0:  # static
+        sr = self.spec.reward
+        if sr.scale("foot_clearance") != 0.0:  # static
             clearance = rw.foot_clearances(
-                fk.foot_pos, self.hfield.height_at, self.foot_radius_m, self.spec.edge_radius_m
+                fk.foot_pos, self.hfield.height_at, self.foot_radius_m, sr.edge_radius_m
             )
         return StepKinematics(
             fk=fk,
@@ -311,8 +308,8 @@ class AnymalToFEnv(Env):
                 self.hfield.height_at,
                 self.foot_radius_m,
                 self.spec.contact_margin_m,
-                self.spec.edge_radius_m,
-                self.spec.edge_height_m,
+                sr.edge_radius_m,
+                sr.edge_height_m,
             ),
             foot_clearance=clearance,
         )
@@ -327,7 +324,7 @@ class AnymalToFEnv(Env):
         """The guidance bias weight (rewards.guidance_weight) from this env's step counter: each
         env steps ``ppo.num_steps`` times per training iteration, so counter / num_steps is the
         iterations done (1 where the decay is off)."""
-        start, end = self.spec.guidance_decay
+        start, end = self.spec.reward.guidance_decay
         if env_steps is None:  # static: the decay is off
             return jp.ones(())
         iteration = env_steps.astype(jp.float32) / float(self.spec.steps_per_iteration)
@@ -371,19 +368,16 @@ class AnymalToFEnv(Env):
             foot_edge=kin.foot_edge,
             foot_clearance=kin.foot_clearance,
         )
-        rcfg = self.cfg.reward
+        sr = self.spec.reward
         terms = rw.scaled_terms(
-            rw.compute_terms(rin, rcfg, self.dt),
-            rcfg.scales,
-            self.dt,
-            float(rcfg.get("overall_scale", added_default("reward.overall_scale"))),
+            rw.compute_terms(rin, sr, self.dt), dict(sr.scales), self.dt, sr.overall_scale
         )
         clip = self.spec.clip_reward
         terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
         valid = 1.0 - diverged.astype(jp.float32)
-        reward = rw.total_reward(terms, self.spec.only_positive, valid)
+        reward = rw.total_reward(terms, sr.only_positive, valid)
         dist = jp.linalg.norm(task.goal - base_pos[:2])
-        success = (ends.truncated & (dist < self.spec.success_radius_m)).astype(jp.float32)
+        success = (ends.truncated & (dist < sr.success_radius_m)).astype(jp.float32)
         return reward, terms, success, dist
 
     def _auto_reset(self, key_reset, d, task: TaskState, action, step, success, ends: Ends, rng):
@@ -488,7 +482,7 @@ class AnymalToFEnv(Env):
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
         metrics.update({k: zero for k in EPISODE_METRICS + STEP_METRICS})
         info = {"task": task, "sensor": sensor_state, "truncation": zero}
-        if self.spec.guidance_decay[1] > 0:  # static: count this env's steps for the decay
+        if self.spec.reward.guidance_decay[1] > 0:  # static: count this env's steps for the decay
             info[ENV_STEPS_KEY] = jp.zeros((), jp.int32)
         return State(
             pipeline_state=d,
@@ -503,7 +497,7 @@ class AnymalToFEnv(Env):
         """Physics state and task state of a fresh episode on tile (level, col) (no sensing)."""
         key_sg, key_par, key_pose, key_rng = jax.random.split(key, 4)
         spawn, goal = sample_spawn_goal(key_sg, self.tmap, level, col)
-        params = sample_episode_params(key_par, self.cfg.env.randomization, self._push_interval)
+        params = sample_episode_params(key_par, self.spec.randomization, self._push_interval)
         # Initial pose: nominal stance, joint noise ~ U(+-init_joint_noise_rad) (wider in stage 2).
         kq, kr = jax.random.split(key_pose)
         jn = self.spec.init_joint_noise_rad

@@ -269,3 +269,33 @@ def test_the_guidance_decay_rule_lives_once(start, end, ok):
             f"[0, reward.guidance_decay_end_iteration={end}) when the decay is on (end > 0)"
         )
     )
+
+
+def test_each_rule_runs_once_on_the_train_path(monkeypatch):
+    """train.py checks the whole config first (check_config); make_train then checks the ppo
+    section and make_networks the network section, as a library caller needs: a rule that passed
+    for a value is not run again (each section is checked once a command), and one that fails
+    fails every time."""
+    from foottof.ppo import toy_envs
+    from foottof.ppo import train as train_lib
+
+    monkeypatch.setattr(cc, "_PASSED", set())
+    calls = {}
+    for name in ("ppo.num_envs", "ppo.gamma", "network.policy", "network.actor_hidden"):
+
+        def counted(value, rule=cc.RULES[name], name=name):
+            calls[name] = calls.get(name, 0) + 1
+            return rule(value)
+
+        monkeypatch.setitem(cc.RULES, name, counted)
+    cfg = load_config(os.path.join(REPO, "configs", "cpu.py"))
+    cc.check_config(cfg)
+    train_lib.make_train(toy_envs.make_memory_env(), cfg)
+    assert calls == dict.fromkeys(calls, 1) and len(calls) == 4, calls
+    monkeypatch.setattr(cc, "_PASSED", set())  # a library caller, without check_config
+    train_lib.make_train(toy_envs.make_memory_env(), cfg)
+    assert calls == dict.fromkeys(calls, 2), calls
+    cfg.network.policy = "gru"
+    for _ in range(2):
+        with pytest.raises(cc.ConfigError, match="network.policy='gru'"):
+            train_lib.make_train(toy_envs.make_memory_env(), cfg)

@@ -96,9 +96,10 @@ class Train(NamedTuple):
 
 
 def _validate(cfg: ml_collections.ConfigDict, num_devices: int) -> None:
-    """The ppo / network rules of foottof.config_check (held there once), and the one rule that
-    needs the devices: whole minibatches of envs on every device."""
-    config_check.check_sections(cfg, ("ppo", "network"))
+    """The ppo rules of foottof.config_check (held there once; the network's are checked by
+    net.make_networks, which builds it), and the one rule that needs the devices: whole
+    minibatches of envs on every device."""
+    config_check.check_sections(cfg, ("ppo",))
     ppo = cfg.ppo
     if ppo.num_envs % num_devices:
         raise ValueError(

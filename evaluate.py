@@ -136,7 +136,7 @@ def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
     """The finished-cell store of this evaluation (foottof.eval.cells): a rerun of an
     interrupted command loads the cells it already finished."""
     from foottof.eval.cells import CellStore, cell_identity
-    from foottof.ppo.checkpoint import policy_digest
+    from foottof.ppo.integrity import policy_digest
 
     policy = policy_digest(ckpt) if ckpt else "untrained"
     return CellStore(out, cell_identity(policy, draws, bool(cfg.eval.deterministic)))

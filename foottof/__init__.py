@@ -1,4 +1,7 @@
-"""foottof: quadruped locomotion over discrete terrain with foot-mounted ToF sensing (JAX + MJX)."""
+"""foottof: quadruped locomotion over discrete terrain with foot-mounted ToF sensing (JAX + MJX).
+
+Side effect on purpose: a sys.meta_path hook, set before mujoco.mjx's import prints warp lines.
+"""
 
 import contextlib
 import importlib.abc

@@ -432,6 +432,18 @@ def _check_model_cross(m) -> None:
         )
 
 
+def _check_guidance_decay_cross(r) -> None:
+    """The guidance bias decay's order (c.reward); foottof.envs.rewards.RewardSpec runs it too."""
+    start, end = r.guidance_decay_start_iteration, r.guidance_decay_end_iteration
+    if end > 0 and not 0 <= start < end:
+        _fail(
+            "reward.guidance_decay_start_iteration",
+            start,
+            f"must be in [0, reward.guidance_decay_end_iteration={end}) when the decay is on "
+            f"(end > 0)",
+        )
+
+
 # Cross-field checks of one section by its path, with the fields they read (check_fields runs
 # them after the RULES when it is given all of those fields).
 _TILE_FIELDS = (
@@ -444,6 +456,11 @@ _TILE_FIELDS = (
     "z_range_m",
 )
 _SECTION_CROSS = {
+    "ppo": (("num_envs", "num_minibatches", "learning_rate", "lr_min", "lr_max"), _check_ppo_cross),
+    "reward": (
+        ("guidance_decay_start_iteration", "guidance_decay_end_iteration"),
+        _check_guidance_decay_cross,
+    ),
     "terrain": (_TILE_FIELDS, _check_tile_cross),
     "env.model": (("timestep", "solref_timeconst"), _check_model_cross),
     "sensor": (("grid", "rate_hz", "max_range_m", "resolution_m"), _check_sensor_cross),
@@ -455,6 +472,41 @@ _SECTION_CROSS = {
         for s in (1, 2)
     },
 }
+
+
+# Each rule runs once a command for the same values: the rules are pure functions of the values
+# they read, so one that passed is remembered (by rule and values; a failure is not) and what
+# check_config passed first (train.py, evaluate.py) is not checked again by the builders that
+# check what they read (make_train: ppo, make_networks: network, the specs via check_fields).
+_PASSED: set[str] = set()
+
+
+def _plain(value):
+    return value.to_dict() if isinstance(value, ml_collections.ConfigDict) else value
+
+
+def _check_rule(path: str, value, check) -> None:
+    """RULES entry ``check`` on the field at ``path`` (once for the same value)."""
+    key = repr(("rule", path, _plain(value)))
+    if key in _PASSED:
+        return
+    why = check(value)
+    if why:
+        _fail(path, value, why)
+    _PASSED.add(key)
+
+
+def _check_section_cross(section: str, values) -> None:
+    """The cross-field checks of ``section`` (a path of _SECTION_CROSS) on ``values`` (mapping
+    or ConfigDict of that section), once for the same values; skipped where a field is absent."""
+    fields, cross = _SECTION_CROSS.get(section, ((), None))
+    if cross is None or not all(f in values for f in fields):
+        return
+    key = repr(("cross", section, tuple(_plain(values[f]) for f in fields)))
+    if key in _PASSED:
+        return
+    cross(ml_collections.ConfigDict({f: values[f] for f in fields}))
+    _PASSED.add(key)
 
 
 def check_fields(section: str, values) -> None:
@@ -472,18 +524,15 @@ def check_fields(section: str, values) -> None:
     values = dict(values)
     for name, value in values.items():
         check = RULES.get(f"{section}.{name}")
-        why = check(value) if check is not None else None
-        if why:
-            _fail(f"{section}.{name}", value, why)
-    fields, cross = _SECTION_CROSS.get(section, ((), None))
-    if cross is not None and all(f in values for f in fields):
-        cross(ml_collections.ConfigDict({f: values[f] for f in fields}))
+        if check is not None:
+            _check_rule(f"{section}.{name}", value, check)
+    _check_section_cross(section, values)
 
 
 def _check_cross(c) -> None:
     """Checks between fields (divisibility, ordering, lengths)."""
-    _check_ppo_cross(c.ppo)
-    _check_sensor_cross(c.sensor)
+    _check_section_cross("ppo", c.ppo)
+    _check_section_cross("sensor", c.sensor)
     t = c.terrain
     if t.up_progress_frac < t.down_progress_frac:
         _fail(
@@ -502,8 +551,8 @@ def _check_cross(c) -> None:
                 dict(t[f"stage{s}_difficulty"]),
                 f"needs a (low, high) range for {missing}",
             )
-        _check_noise_stage_cross(c.noise[f"stage{s}"], f"noise.stage{s}")
-    _check_tile_cross(t)
+        _check_section_cross(f"noise.stage{s}", c.noise[f"stage{s}"])
+    _check_section_cross("terrain", t)
     s = c.sensor
     n_sensors = len(s.sites)
     for name, width in (("tilt_x_deg", None), ("tilt_y_deg", None), ("offset_m", 3)):
@@ -537,7 +586,8 @@ def _check_cross(c) -> None:
             m.timestep,
             f"must divide the control period {CONTROL_DT_S:g} s into whole physics steps",
         )
-    _check_model_cross(m)
+    _check_section_cross("env.model", m)
+    _check_section_cross("reward", c.reward)
     sat = c.env.control.get("saturation_torque")
     if sat is not None and _num(0.0, lo_open=True)(sat):
         _fail("env.control.saturation_torque", sat, "must be None or a number > 0")
@@ -551,11 +601,9 @@ def check_sections(cfg, sections: tuple[str, ...]) -> None:
         if pattern.split(".")[0] not in sections:
             continue
         for path, value in _items(cfg, pattern):
-            why = check(value)
-            if why:
-                _fail(path, value, why)
+            _check_rule(path, value, check)
     if "ppo" in sections:
-        _check_ppo_cross(cfg.ppo)
+        _check_section_cross("ppo", cfg.ppo)
 
 
 def check_config(cfg: ml_collections.ConfigDict) -> None:
@@ -575,9 +623,7 @@ def check_config(cfg: ml_collections.ConfigDict) -> None:
         )
     for pattern, check in RULES.items():
         for path, value in _items(cfg, pattern):
-            why = check(value)
-            if why:
-                _fail(path, value, why)
+            _check_rule(path, value, check)
     for path, value in _leaves(cfg):  # fields without a rule (e.g. new ones): no NaN / inf
         if isinstance(value, float) and not math.isfinite(value):
             _fail(path, value, "must be finite")

@@ -34,11 +34,30 @@ ADDED_FIELDS = {
     "reward.guidance_goal_pay": True,  # guidance pays full credit within the success radius
     "reward.guidance_decay_start_iteration": 0,  # read only when the decay end is > 0
     "reward.guidance_decay_end_iteration": 0,  # 0: the guidance bias never decays
-    "reward.stall_toward_goal": False,
+    "reward.stall_toward_goal": False,  # stall: slow in any direction (not toward the goal)
     "reward.overall_scale": 1.0,  # every reward term as scaled
     "train.teacher": "",  # PPO, no distillation
-    "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)  # stall: slow in any direction (not toward the goal)
+    "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)
+    "env.critic_height_scan": False,  # off: the critic reads no base-centred height scan
+    "env.foot_stuck_depth_m": 0.0,  # off: a foot in a gap does not end the episode
+    "terrain.no_promotion_on_fall": False,  # a failed episode may still be promoted
+    "env.physics": "auto",  # MuJoCo C on a CPU JAX backend, else MJX
+    "env.physics_threads": 0,  # os.cpu_count() MuJoCo C threads
+    "network.max_noise_std": 0.0,  # no cap on the action std
 }
+# Added fields that were already in the configs of the evaluations kept (results/): draw
+# fingerprints hash them at every value, as those evaluations did; ADDED_FIELDS gives only the
+# fallback of run configs saved before they existed.
+HASHED_AT_DEFAULT = frozenset(
+    {
+        "env.critic_height_scan",
+        "env.foot_stuck_depth_m",
+        "terrain.no_promotion_on_fall",
+        "env.physics",
+        "env.physics_threads",
+        "network.max_noise_std",
+    }
+)
 
 
 def added_default(field: str):
@@ -47,6 +66,15 @@ def added_default(field: str):
     if field not in ADDED_FIELDS:
         raise KeyError(f"{field!r} is not an added field; added fields: {sorted(ADDED_FIELDS)}")
     return ADDED_FIELDS[field]
+
+
+def read_added(section, field: str):
+    """The value of ADDED_FIELDS entry ``field`` (dotted path) in ``section``, the config section
+    (ConfigDict or dict) that holds it, or its old-behaviour default where a config saved before
+    the field existed lacks it: every such fallback goes through here.
+
+    Example: ``read_added(cfg.terrain, "terrain.stretch_prob")``."""
+    return section.get(field.rsplit(".", 1)[-1], added_default(field))
 
 
 # Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
@@ -69,6 +97,8 @@ def legacy_config_dict(current: dict) -> dict:
     an addition still pair episode by episode."""
     out = _copy(current)
     for added, default in ADDED_FIELDS.items():
+        if added in HASHED_AT_DEFAULT:
+            continue
         *path, leaf = added.split(".")
         parent = _walk(out, path)
         if parent is not None and leaf in parent and parent[leaf] == default:

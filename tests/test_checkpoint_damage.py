@@ -10,7 +10,7 @@ import pytest
 from helpers import REPO, run_cli, tiny_cfg, tree_equal
 
 from foottof.ppo import checkpoint as ckpt
-from foottof.ppo import runner, toy_envs
+from foottof.ppo import integrity, runner, toy_envs
 
 ENV = toy_envs.make_memory_env()
 
@@ -40,13 +40,13 @@ def _garble_manifest(step_dir: str) -> str:
 
 def _garble_manifest_legacy(step_dir: str) -> str:
     """A checkpoint written before the integrity record: only reading it shows the damage."""
-    os.remove(os.path.join(step_dir, ckpt.INTEGRITY_FILE))
+    os.remove(os.path.join(step_dir, integrity.INTEGRITY_FILE))
     _garble_manifest(step_dir)
     return "manifest unreadable"
 
 
 def _truncate_legacy(step_dir: str) -> str:
-    os.remove(os.path.join(step_dir, ckpt.INTEGRITY_FILE))
+    os.remove(os.path.join(step_dir, integrity.INTEGRITY_FILE))
     _truncate(step_dir)
     return "data unreadable"
 
@@ -126,16 +126,16 @@ def test_unreadable_is_not_a_mismatch(run4, tmp_path):
 
 def test_integrity_record_lists_every_file(run4):
     step_dir = os.path.join(run4, "checkpoints", "4")
-    with open(os.path.join(step_dir, ckpt.INTEGRITY_FILE)) as f:
+    with open(os.path.join(step_dir, integrity.INTEGRITY_FILE)) as f:
         record = json.load(f)["files"]
     on_disk = {
         os.path.relpath(os.path.join(r, n), step_dir)
         for r, _, names in os.walk(step_dir)
         for n in names
-        if n != ckpt.INTEGRITY_FILE
+        if n != integrity.INTEGRITY_FILE
     }
     assert set(record) == on_disk and len(on_disk) > 20
-    assert ckpt.integrity_problem(step_dir) is None
+    assert integrity.integrity_problem(step_dir) is None
 
 
 @pytest.mark.parametrize("policy", ["flat", "stage1"])
@@ -145,8 +145,8 @@ def test_shipped_policies_carry_an_intact_record(policy):
     assert steps
     for step in steps:
         step_dir = os.path.join(run, "checkpoints", step)
-        assert os.path.exists(os.path.join(step_dir, ckpt.INTEGRITY_FILE))
-        assert ckpt.integrity_problem(step_dir) is None
+        assert os.path.exists(os.path.join(step_dir, integrity.INTEGRITY_FILE))
+        assert integrity.integrity_problem(step_dir) is None
 
 
 def test_evaluate_on_a_damaged_checkpoint_exits_with_one_unreadable_line(tmp_path):

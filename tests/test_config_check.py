@@ -240,3 +240,62 @@ def test_check_imports_no_jax():
     r = subprocess.run([sys.executable, "-c", code], cwd=REPO, capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
     assert r.stdout.strip() == "[]", r.stdout
+
+
+@pytest.mark.parametrize(
+    "start, end, ok", [(5, 3, False), (3, 3, False), (0, 1, True), (500, 1500, True), (7, 0, True)]
+)
+def test_the_guidance_decay_rule_lives_once(start, end, ok):
+    """reward.guidance_decay_start_iteration < _end_iteration when the decay is on (end > 0):
+    the same one line from the whole-config check and from the RewardSpec the env builds."""
+    from foottof.envs.rewards import RewardSpec
+
+    cfg = load_config(os.path.join(REPO, "configs", "stage1_cpu.py"))
+    cfg.reward.guidance_decay_start_iteration = start
+    cfg.reward.guidance_decay_end_iteration = end
+    if ok:
+        cc.check_config(cfg)
+        assert RewardSpec.from_config(cfg.reward).guidance_decay == (start, end)
+        return
+    with pytest.raises(cc.ConfigError) as from_config:
+        cc.check_config(cfg)
+    with pytest.raises(ValueError) as from_spec:
+        RewardSpec.from_config(cfg.reward)
+    assert (
+        str(from_spec.value)
+        == str(from_config.value)
+        == (
+            f"reward.guidance_decay_start_iteration={start}: must be in "
+            f"[0, reward.guidance_decay_end_iteration={end}) when the decay is on (end > 0)"
+        )
+    )
+
+
+def test_each_rule_runs_once_on_the_train_path(monkeypatch):
+    """train.py checks the whole config first (check_config); make_train then checks the ppo
+    section and make_networks the network section, as a library caller needs: a rule that passed
+    for a value is not run again (each section is checked once a command), and one that fails
+    fails every time."""
+    from foottof.ppo import toy_envs
+    from foottof.ppo import train as train_lib
+
+    monkeypatch.setattr(cc, "_PASSED", set())
+    calls = {}
+    for name in ("ppo.num_envs", "ppo.gamma", "network.policy", "network.actor_hidden"):
+
+        def counted(value, rule=cc.RULES[name], name=name):
+            calls[name] = calls.get(name, 0) + 1
+            return rule(value)
+
+        monkeypatch.setitem(cc.RULES, name, counted)
+    cfg = load_config(os.path.join(REPO, "configs", "cpu.py"))
+    cc.check_config(cfg)
+    train_lib.make_train(toy_envs.make_memory_env(), cfg)
+    assert calls == dict.fromkeys(calls, 1) and len(calls) == 4, calls
+    monkeypatch.setattr(cc, "_PASSED", set())  # a library caller, without check_config
+    train_lib.make_train(toy_envs.make_memory_env(), cfg)
+    assert calls == dict.fromkeys(calls, 2), calls
+    cfg.network.policy = "gru"
+    for _ in range(2):
+        with pytest.raises(cc.ConfigError, match="network.policy='gru'"):
+            train_lib.make_train(toy_envs.make_memory_env(), cfg)

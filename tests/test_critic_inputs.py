@@ -10,7 +10,7 @@ import pytest
 from helpers import REPO, hfield_mj_model
 
 from configs import flat
-from foottof.envs.anymal_tof import critic_height_scan, critic_scan_points
+from foottof.envs.observations import critic_height_scan, critic_scan_points
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo.networks import make_networks
 from foottof.terrain import Heightfield

@@ -330,7 +330,7 @@ def test_two_processes_equal_two_devices_and_resume(tmp_path):  # ~2.5 min on a 
     values, (a + b) / 2, rounds the same in either order, so metrics (wall clock aside), params,
     Adam state and normalizer must be bit-identical; every checkpoint of the 2-process run reads
     back (its integrity record, written by process 0, matches its files)."""
-    from foottof.ppo import checkpoint as ckpt
+    from foottof.ppo import integrity
 
     one = tmp_path / "one_process"
     _ok(
@@ -362,8 +362,8 @@ def test_two_processes_equal_two_devices_and_resume(tmp_path):  # ~2.5 min on a 
     checkpoints = two / "checkpoints"
     assert sorted(os.listdir(checkpoints)) == ["1", "2", "3", "4", "5"]
     for step in range(1, 6):
-        assert (checkpoints / str(step) / ckpt.INTEGRITY_FILE).exists(), step
-        assert ckpt.integrity_problem(str(checkpoints / str(step))) is None, step
+        assert (checkpoints / str(step) / integrity.INTEGRITY_FILE).exists(), step
+        assert integrity.integrity_problem(str(checkpoints / str(step))) is None, step
 
 
 @pytest.mark.slow

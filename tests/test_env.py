@@ -275,8 +275,14 @@ def _inputs(**kw):
     return rw.RewardInputs(**base)
 
 
+def _spec(rcfg) -> rw.RewardSpec:
+    return rw.RewardSpec.from_config(rcfg)
+
+
 def _terms(**kw):
-    return {k: float(v) for k, v in rw.compute_terms(_inputs(**kw), _cfg().reward, 0.02).items()}
+    return {
+        k: float(v) for k, v in rw.compute_terms(_inputs(**kw), _spec(_cfg().reward), 0.02).items()
+    }
 
 
 def test_reward_terms_hand_checked():
@@ -286,8 +292,9 @@ def test_reward_terms_hand_checked():
     # ... clipped at guidance_max_speed_mps (1.0): v = (3, 4) -> 5 m/s toward -> 1.0
     assert _terms(base_lin_vel=jp.array([3.0, 4.0, 0.0]))["guidance"] == pytest.approx(1.0)
     # ... or, with guidance_peaked, falling above it: 2 * 1.0 - v, not below -1.0.
-    peaked = _cfg().reward
-    peaked.guidance_peaked = True
+    peaked_cfg = _cfg().reward
+    peaked_cfg.guidance_peaked = True
+    peaked = _spec(peaked_cfg)
     for v, want in ((0.5, 0.5), (1.0, 1.0), (1.5, 0.5), (2.5, -0.5), (5.0, -1.0), (-2.0, -1.0)):
         x = _inputs(base_lin_vel=jp.array([0.6 * v, 0.8 * v, 0.0]))
         assert float(rw.compute_terms(x, peaked, 0.02)["guidance"]) == pytest.approx(want)
@@ -351,7 +358,7 @@ def test_arrive_task_terms_hand_checked():
     r = cfg.reward
 
     def terms(**kw):
-        return {k: float(v) for k, v in rw.compute_terms(_inputs(**kw), r, 0.02).items()}
+        return {k: float(v) for k, v in rw.compute_terms(_inputs(**kw), _spec(r), 0.02).items()}
 
     # Task: goal (3, 4) is 5 m away -> 1 / (2 s * (1 + 25)) per s inside the 2 s window only.
     assert terms(time_left_s=jp.asarray(1.0))["task"] == pytest.approx(1.0 / 52.0)
@@ -366,7 +373,9 @@ def test_arrive_task_terms_hand_checked():
     total = sum(
         rw.scaled_terms(
             rw.compute_terms(
-                _inputs(goal_xy=jp.array([0.3, 0.4]), time_left_s=jp.asarray(k * 0.02)), r, 0.02
+                _inputs(goal_xy=jp.array([0.3, 0.4]), time_left_s=jp.asarray(k * 0.02)),
+                _spec(r),
+                0.02,
             ),
             r.scales,
             0.02,
@@ -424,7 +433,7 @@ def test_guidance_weight_counts_training_steps_across_resets(env):
 def test_actor_terrain_adds_the_teachers_inputs():
     """env.actor_terrain appends the critic's foot patches (36) and the first 117 scan points
     (x <= 0.6 m) to the actor's observation; the rest is unchanged."""
-    from foottof.envs.anymal_tof import ACTOR_SCAN_POINTS, critic_scan_points
+    from foottof.envs.observations import ACTOR_SCAN_POINTS, critic_scan_points
 
     cfg = _cfg()
     cfg.env.critic_height_scan = True

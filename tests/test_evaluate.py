@@ -611,7 +611,7 @@ def test_cell_store_reuses_only_an_intact_cell_of_the_same_identity(tmp_path):
 
 
 def test_policy_digest_follows_the_policy_files(tmp_path):
-    from foottof.ppo.checkpoint import policy_digest
+    from foottof.ppo.integrity import policy_digest
 
     run = tmp_path / "run"
     for step, value in ((10, b"a"), (20, b"b")):

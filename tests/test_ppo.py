@@ -105,6 +105,57 @@ def test_max_noise_std_caps_the_sampled_actions_and_the_logged_std():
         train_lib.make_train(env, cfg)
 
 
+# --------------------------------------------------------------------- iteration parts alone
+def test_epoch_minibatches_hold_each_env_once_in_time_order():
+    """train.epoch_minibatches alone: 8 envs x 3 steps into 4 minibatches of 2 envs; entry
+    (t, n) of every field encodes 100 t + n, so each minibatch must hold whole env sequences."""
+    t_steps, n_envs = 3, 8
+    code = 100.0 * jp.arange(t_steps)[:, None] + jp.arange(n_envs)[None]  # (T, N)
+    data = losses.Minibatch(
+        carry=(jp.arange(n_envs, dtype=jp.float32)[:, None] * jp.ones((1, 5)),),  # (N, H)
+        obs={"state": code[..., None] * jp.ones(2)},  # (T, N, 2)
+        resets=code, actions=code[..., None], log_probs=code, means=code[..., None],
+        log_std=jp.array([0.25]), values=code, advantages=code, returns=code,
+    )  # fmt: skip
+    mb = train_lib.epoch_minibatches(data, jax.random.PRNGKey(3), num_minibatches=4)
+    assert mb.resets.shape == (4, t_steps, 2) and mb.obs["state"].shape == (4, t_steps, 2, 2)
+    assert mb.carry[0].shape == (4, 2, 5) and mb.log_std.shape == (4, 1)
+    envs = np.asarray(mb.resets[:, 0, :])  # (M, B): the env each column holds
+    assert sorted(envs.ravel().tolist()) == list(range(n_envs))  # each env exactly once
+    want = 100.0 * np.arange(t_steps)[None, :, None] + envs[:, None, :]  # whole sequences
+    for field in (mb.resets, mb.log_probs, mb.values, mb.advantages, mb.returns):
+        np.testing.assert_array_equal(np.asarray(field), want)
+    np.testing.assert_array_equal(np.asarray(mb.obs["state"][..., 1]), want)
+    np.testing.assert_array_equal(np.asarray(mb.carry[0][..., 0]), envs)  # carry of the same env
+    np.testing.assert_array_equal(np.asarray(mb.log_std), 0.25)
+    other = train_lib.epoch_minibatches(data, jax.random.PRNGKey(4), num_minibatches=4)
+    assert not np.array_equal(np.asarray(other.resets), np.asarray(mb.resets))  # a new shuffle
+
+
+def test_rollout_alone_books_episodes():
+    """train.rollout alone (no mesh, no jit) on the cue task, episodes of 3 steps over 7 steps:
+    dones at t = 2 and 5, carry resets at t = 0 (fresh state), 3 and 6, each finished episode's
+    length 3 and return the sum of its rewards, and 1 step of the running episode left over."""
+    env = toy_envs.make_memory_env(episode_length=3)
+    trainer = train_lib.make_train(env, tiny_cfg())
+    state = trainer.init(jax.random.PRNGKey(0))
+    carry, traj, last_value = train_lib.rollout(
+        env, trainer.networks, state, jax.random.PRNGKey(1), num_steps=7
+    )
+    dones, resets = np.asarray(traj.dones), np.asarray(traj.resets)
+    assert dones.shape == (7, 8) and last_value.shape == (8,)
+    np.testing.assert_array_equal(dones, np.isin(np.arange(7), (2, 5))[:, None] * np.ones(8))
+    np.testing.assert_array_equal(resets, np.isin(np.arange(7), (0, 3, 6))[:, None] * np.ones(8))
+    rewards = np.asarray(traj.rewards)
+    np.testing.assert_array_equal(np.asarray(traj.finished_length), 3.0 * dones)
+    np.testing.assert_allclose(traj.finished_return[2], rewards[0:3].sum(0), rtol=1e-6)
+    np.testing.assert_allclose(traj.finished_return[5], rewards[3:6].sum(0), rtol=1e-6)
+    env_state, _, prev_done, ep_return, ep_length = carry
+    np.testing.assert_array_equal(np.asarray(ep_length), 1.0)
+    np.testing.assert_allclose(ep_return, rewards[6], rtol=1e-6)
+    assert not np.asarray(prev_done).any()
+
+
 # -------------------------------------------------------------------------------- memory task
 @pytest.fixture(scope="module")
 def lstm_memory_run():

@@ -167,7 +167,7 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     import ml_collections
 
     from foottof.envs import rewards
-    from foottof.envs.anymal_tof import TaskSpec
+    from foottof.envs.task_spec import TaskSpec
 
     cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
     at_default = cfg.to_dict()
@@ -197,15 +197,18 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
         **dict(knee_contact=jp.zeros(4), foot_edge=jp.zeros(4), foot_clearance=jp.full(4, 0.02)),
         **dict(time_left_s=jp.asarray(1.0), guidance_weight=jp.asarray(1.0)),  # in the window
     )
-    terms = lambda c: rewards.compute_terms(x, c.reward, 0.02)  # noqa: E731
+
+    def terms(c):
+        return rewards.compute_terms(x, rewards.RewardSpec.from_config(c.reward), 0.02)
+
     assert float(terms(new)["foot_clearance"]) > 0.0
     for name, value in terms(old).items():
         assert jp.allclose(value, terms(new)[name]), name
 
     # ... and scale alike: an absent added term (reward.scales.task) scales to its default, off
-    def scaled(c):
-        overall = c.reward.get("overall_scale", renames.added_default("reward.overall_scale"))
-        return rewards.scaled_terms(terms(c), c.reward.scales, 0.02, overall)
+    def scaled(c):  # as the env scales them
+        spec = rewards.RewardSpec.from_config(c.reward)
+        return rewards.scaled_terms(terms(c), dict(spec.scales), 0.02, spec.overall_scale)
 
     for name, value in scaled(old).items():
         assert jp.allclose(value, scaled(new)[name]), name
@@ -220,3 +223,18 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     assert make_networks(12, old.network).module != make_networks(12, new.network).module
     with pytest.raises(KeyError, match="not an added field"):
         renames.added_default("terrain.num_levels")
+
+
+def test_read_added_is_the_one_fallback():
+    """renames.read_added: the section's value, else the ADDED_FIELDS default; a field that is
+    not listed is an error (its fallback would be written somewhere else)."""
+    import ml_collections
+
+    assert renames.read_added({"physics": "mjx"}, "env.physics") == "mjx"
+    assert renames.read_added({}, "env.physics") == "auto"
+    terrain = ml_collections.ConfigDict({"stretch_min_level": 4})
+    assert renames.read_added(terrain, "terrain.stretch_min_level") == 4
+    assert renames.read_added(terrain, "terrain.stretch_prob") == 0.0
+    with pytest.raises(KeyError, match="not an added field"):
+        renames.read_added({}, "env.source")
+    assert renames.HASHED_AT_DEFAULT <= set(renames.ADDED_FIELDS)

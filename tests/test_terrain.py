@@ -12,7 +12,7 @@ from helpers import hfield_mj_model
 from scipy import ndimage
 
 from configs import _eval, _terrain
-from foottof.envs.anymal_tof import foot_gap_depth, foot_stuck
+from foottof.envs.stuck_probe import foot_gap_depth, foot_stuck
 from foottof.terrain import (
     SPAWN_X,
     SPAWN_Y,

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
 from typing import NamedTuple
 
@@ -12,14 +11,17 @@ from brax.envs.base import Env, State
 from flax import struct
 
 from foottof import constants
+from foottof.envs import observations as obs_lib
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
 from foottof.envs.sensing import select_where
+from foottof.envs.stuck_probe import foot_stuck
+from foottof.envs.task_spec import TaskSpec
 from foottof.perception import check_source
 from foottof.perception.odometry import noisy_odometry
 from foottof.physics import make_physics
-from foottof.renames import added_default
+from foottof.renames import read_added
 from foottof.robot import kinematics
 from foottof.robot.model import (
     BASE_SPHERE_CENTRES_M,
@@ -51,108 +53,6 @@ STEP_METRICS = ("task/speed_mps", "task/feet_at_edges", "task/guidance_weight")
 ENV_STEPS_KEY = "env_steps"
 
 
-@dataclasses.dataclass(frozen=True)
-class TaskSpec:
-    """The task's settings, read once from the config (``TaskSpec.from_config(cfg)``); every
-    phase of the step reads these, not the config."""
-
-    clip_actions: float
-    randomize: bool
-    push_vel_mps: float
-    kp: float
-    kd: float
-    max_joint_speed_rads: float
-    contact_margin_m: float
-    edge_radius_m: float
-    edge_height_m: float
-    clip_reward: float
-    only_positive: bool
-    success_radius_m: float
-    bootstrap_time_limit: bool
-    body_contact_margin_m: float
-    knee_contact_terminates: bool
-    fall_height_above_floor_m: float
-    foot_fall_z_m: float
-    foot_stuck_depth_m: float
-    max_tilt_deg: float
-    down_progress_frac: float
-    up_progress_frac: float
-    no_promotion_on_fall: bool
-    stretch_prob: float
-    stretch_min_level: int
-    init_level_max: int
-    init_joint_noise_rad: float
-    init_roll_pitch_rad: float
-    spawn_height_offset_m: float
-    clip_observations: float
-    critic_height_scan: bool
-    actor_terrain: bool
-    guidance_decay: tuple[int, int]  # (start, end) training iteration; end 0: no decay
-    steps_per_iteration: int  # control steps each env takes per training iteration
-
-    @classmethod
-    def from_config(cls, cfg) -> TaskSpec:
-        e, t = cfg.env, cfg.terrain
-        return cls(
-            clip_actions=float(e.clip_actions),
-            randomize=bool(e.randomization.enabled),
-            push_vel_mps=float(e.randomization.push_vel_mps),
-            kp=float(e.control.kp),
-            kd=float(e.control.kd),
-            max_joint_speed_rads=float(e.max_joint_speed_rads),
-            contact_margin_m=float(e.contact_margin_m),
-            edge_radius_m=float(cfg.reward.edge_radius_m),
-            edge_height_m=float(cfg.reward.edge_height_m),
-            clip_reward=float(e.clip_reward),
-            only_positive=bool(cfg.reward.only_positive),
-            success_radius_m=float(cfg.reward.success_radius_m),
-            bootstrap_time_limit=bool(e.bootstrap_time_limit),
-            body_contact_margin_m=float(e.body_contact_margin_m),
-            knee_contact_terminates=bool(e.knee_contact_terminates),
-            fall_height_above_floor_m=float(e.fall_height_above_floor_m),
-            foot_fall_z_m=float(e.foot_fall_z_m),
-            foot_stuck_depth_m=float(e.get("foot_stuck_depth_m", 0.0)),
-            max_tilt_deg=float(e.max_tilt_deg),
-            down_progress_frac=float(t.down_progress_frac),
-            up_progress_frac=float(t.up_progress_frac),
-            no_promotion_on_fall=bool(t.get("no_promotion_on_fall", False)),
-            stretch_prob=float(t.get("stretch_prob", added_default("terrain.stretch_prob"))),
-            stretch_min_level=int(
-                t.get("stretch_min_level", added_default("terrain.stretch_min_level"))
-            ),
-            init_level_max=int(t.init_level_max),
-            init_joint_noise_rad=float(e.init_joint_noise_rad),
-            init_roll_pitch_rad=float(e.init_roll_pitch_rad),
-            spawn_height_offset_m=float(e.spawn_height_offset_m),
-            clip_observations=float(e.clip_observations),
-            critic_height_scan=bool(e.get("critic_height_scan", False)),
-            actor_terrain=bool(e.get("actor_terrain", added_default("env.actor_terrain"))),
-            guidance_decay=_guidance_decay(cfg.reward),
-            steps_per_iteration=int(cfg.ppo.num_steps),
-        )
-
-
-def _guidance_decay(rcfg) -> tuple[int, int]:
-    """(start, end) iterations of the guidance bias decay (end 0: none), checked."""
-    start = int(
-        rcfg.get(
-            "guidance_decay_start_iteration",
-            added_default("reward.guidance_decay_start_iteration"),
-        )
-    )
-    end = int(
-        rcfg.get(
-            "guidance_decay_end_iteration", added_default("reward.guidance_decay_end_iteration")
-        )
-    )
-    if end > 0 and not 0 <= start < end:
-        raise ValueError(
-            f"reward.guidance_decay_start_iteration={start} must be in [0, "
-            f"reward.guidance_decay_end_iteration={end}) when the decay is on (end > 0)"
-        )
-    return start, end
-
-
 class StepKinematics(NamedTuple):
     """What the terminations and rewards read of the state after the physics step."""
 
@@ -172,94 +72,6 @@ class Ends(NamedTuple):
     done: jax.Array  # () bool
     knee_contact: jax.Array  # (4,) float
     stuck: jax.Array  # () bool: a foot went into a gap (its own reason, part of failed)
-
-
-# Stuck-foot probe: the terrain within this radius of a foot centre (the centre and 8 points on
-# the circle) is what the foot is compared against; one cell (4 cm) and a margin, so that the tops
-# beside a one-vertex notch are in reach [m].
-STUCK_PROBE_RADIUS_M = 0.05
-# A gap, not a step: the probed terrain spans more than this (pits lie >= 0.8 m below the stone
-# tops; stairs, boxes and drawn cracks span <= 0.3 m within 5 cm) [m].
-STUCK_GAP_SPAN_M = 0.4
-_STUCK_PROBE = tuple(
-    (
-        STUCK_PROBE_RADIUS_M * math.cos(k * math.pi / 4),
-        STUCK_PROBE_RADIUS_M * math.sin(k * math.pi / 4),
-    )
-    for k in range(8)
-) + ((0.0, 0.0),)
-
-
-def _probe_top_bottom(foot_pos: jax.Array, height_at) -> tuple[jax.Array, jax.Array]:
-    """(F,) highest and lowest terrain within STUCK_PROBE_RADIUS_M of each foot centre [m]."""
-    offs = jp.asarray(_STUCK_PROBE, jp.float32)
-    around = height_at(foot_pos[:, None, :2] + offs[None])  # (F, 9)
-    return jp.max(around, axis=-1), jp.min(around, axis=-1)
-
-
-def foot_stuck(foot_pos: jax.Array, height_at, depth_m: float) -> jax.Array:
-    """(F,) bool: a foot went into a gap (wedged in a drawn notch, or falling through): its centre
-    lies more than ``depth_m`` below the highest terrain within STUCK_PROBE_RADIUS_M, and that
-    terrain spans a gap (more than STUCK_GAP_SPAN_M from its lowest to its highest point)."""
-    top, bottom = _probe_top_bottom(foot_pos, height_at)
-    return (foot_pos[:, 2] < top - depth_m) & (top - bottom > STUCK_GAP_SPAN_M)
-
-
-def foot_gap_depth(foot_pos: jax.Array, height_at) -> jax.Array:
-    """(F,) how far each foot centre lies below the highest terrain around it [m] where that
-    terrain spans a gap, as foot_stuck measures it (-inf for a foot with no gap around it): which
-    foot went in, for the failure analysis (foottof.eval.failures)."""
-    top, bottom = _probe_top_bottom(foot_pos, height_at)
-    return jp.where(top - bottom > STUCK_GAP_SPAN_M, top - foot_pos[:, 2], -jp.inf)
-
-
-def actor_obs_layout(num_sensors: int, num_zones: int) -> list[tuple[str, int, int, str]]:
-    """(name, start, stop, what) of each block of the actor observation ``obs['state']``, in
-    order (see AnymalToFEnv._observe); stop of the last block = the observation size."""
-    blocks = [
-        ("tof_distance", num_sensors * num_zones, "zone distances, sensor-major [m]"),
-        ("tof_valid", num_sensors * num_zones, "zone validity {0, 1}"),
-        ("tof_age", num_sensors, "age of each sensor's frame [s]"),
-        ("joint_pos", 12, "joint positions minus the default pose [rad] (JOINT_NAMES order)"),
-        ("joint_vel", 12, "joint velocities x 0.05 [rad/s]"),
-        ("projected_gravity", 3, "gravity unit vector in the base frame"),
-        ("base_lin_vel", 3, "base linear velocity estimate, base frame [m/s]"),
-        ("base_ang_vel", 3, "base angular velocity estimate x 0.25 [rad/s]"),
-        ("goal", 4, "goal distance clipped at 5 m [m], direction in the base frame (2), time left"),
-        ("last_action", 12, "previous action (before scaling)"),
-    ]
-    out, start = [], 0
-    for name, n, what in blocks:
-        out.append((name, start, start + n, what))
-        start += n
-    return out
-
-
-def critic_height_scan(height_at, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
-    """(P,) terrain heights relative to the base at :func:`critic_scan_points`, turned with the
-    base's heading (yaw only), clipped to +-1 m [m]."""
-    fwd = kinematics.quat_to_mat(base_quat)[:2, 0]  # base x axis, horizontal part
-    fwd = fwd / jp.maximum(jp.linalg.norm(fwd), 1e-6)
-    rot = jp.array([[fwd[0], -fwd[1]], [fwd[1], fwd[0]]])  # yaw rotation
-    pts = base_pos[None, 0:2] + critic_scan_points() @ rot.T
-    return jp.clip(height_at(pts) - base_pos[2], -1.0, 1.0)
-
-
-# The teacher's scan (env.actor_terrain): the critic scan's rows up to 0.6 m ahead of the base
-# (13 x 9 = 117 points), about as far as the front feet's ToF sensors have looked; the 1.2 m of
-# the critic's would let a teacher act on terrain no student has seen.
-ACTOR_SCAN_ROWS = 13
-ACTOR_SCAN_POINTS = ACTOR_SCAN_ROWS * 9
-ACTOR_TERRAIN_INPUTS = 4 * 9 + ACTOR_SCAN_POINTS  # what env.actor_terrain appends (153)
-
-
-def critic_scan_points() -> jax.Array:
-    """(P, 2) base-yaw-frame x, y of the critic's height scan: x -0.6..1.2 m, y -0.4..0.4 m,
-    10 cm apart (19 x 9 = 171 points; legged_gym's grid, shifted forward to see the next gaps)."""
-    xs = jp.linspace(-0.6, 1.2, 19)
-    ys = jp.linspace(-0.4, 0.4, 9)
-    gx, gy = jp.meshgrid(xs, ys, indexing="ij")
-    return jp.stack([gx.reshape(-1), gy.reshape(-1)], axis=-1)
 
 
 @struct.dataclass
@@ -312,8 +124,7 @@ class AnymalToFEnv(Env):
         terrain_map: TerrainMap | None = None,
     ):
         check_source(source, allow_all=False)
-        rw.check_scales(cfg.reward.scales)
-        self.cfg = cfg
+        self.cfg = cfg  # kept for callers; the step's phases read self.spec
         self.spec = TaskSpec.from_config(cfg)
         self.source = source
         ecfg = cfg.env
@@ -329,10 +140,10 @@ class AnymalToFEnv(Env):
         # Physics backend (env.physics: MJX or MuJoCo C); the PD gains come per step.
         drive = {k: v for k, v in dict(ecfg.control).items() if k not in ("kp", "kd")}
         self.physics = make_physics(
-            str(ecfg.get("physics", "auto")),
+            str(read_added(ecfg, "env.physics")),
             self.mj_model,
             drive,
-            int(ecfg.get("physics_threads", 0)),
+            int(read_added(ecfg, "env.physics_threads")),
         )
         self._default_q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
         self._stand_height = kinematics.nominal_base_height(
@@ -460,9 +271,9 @@ class AnymalToFEnv(Env):
         action = jp.clip(action, -sp.clip_actions, sp.clip_actions)
         q_target = self._default_q + constants.ACTION_SCALE * action
         # Push: add a random horizontal base velocity every push interval.
-        push_now = (task.step == p.push_step) & sp.randomize
+        push_now = (task.step == p.push_step) & sp.randomization.enabled
         push = jax.random.uniform(key_push, (2,), minval=-1.0, maxval=1.0)
-        push = push * sp.push_vel_mps * push_now
+        push = push * sp.randomization.push_vel_mps * push_now
         d = d.replace(qvel=d.qvel.at[0:2].add(push))
         kp = sp.kp * p.kp_scale * p.motor_strength
         kd = sp.kd * p.kd_scale * p.motor_strength
@@ -482,12 +293,10 @@ class AnymalToFEnv(Env):
         (when reward.scales.foot_clearance is on) foot clearances."""
         fk, foot_vel = self._foot_kinematics(d)
         clearance = jp.zeros(4)
-        clearance_scale = self.cfg.reward.scales.get(
-            "foot_clearance", added_default("reward.scales.foot_clearance")
-        )
-        if float(clearance_scale) != 0.0:  # static
+        sr = self.spec.reward
+        if sr.scale("foot_clearance") != 0.0:  # static
             clearance = rw.foot_clearances(
-                fk.foot_pos, self.hfield.height_at, self.foot_radius_m, self.spec.edge_radius_m
+                fk.foot_pos, self.hfield.height_at, self.foot_radius_m, sr.edge_radius_m
             )
         return StepKinematics(
             fk=fk,
@@ -499,8 +308,8 @@ class AnymalToFEnv(Env):
                 self.hfield.height_at,
                 self.foot_radius_m,
                 self.spec.contact_margin_m,
-                self.spec.edge_radius_m,
-                self.spec.edge_height_m,
+                sr.edge_radius_m,
+                sr.edge_height_m,
             ),
             foot_clearance=clearance,
         )
@@ -515,7 +324,7 @@ class AnymalToFEnv(Env):
         """The guidance bias weight (rewards.guidance_weight) from this env's step counter: each
         env steps ``ppo.num_steps`` times per training iteration, so counter / num_steps is the
         iterations done (1 where the decay is off)."""
-        start, end = self.spec.guidance_decay
+        start, end = self.spec.reward.guidance_decay
         if env_steps is None:  # static: the decay is off
             return jp.ones(())
         iteration = env_steps.astype(jp.float32) / float(self.spec.steps_per_iteration)
@@ -559,19 +368,16 @@ class AnymalToFEnv(Env):
             foot_edge=kin.foot_edge,
             foot_clearance=kin.foot_clearance,
         )
-        rcfg = self.cfg.reward
+        sr = self.spec.reward
         terms = rw.scaled_terms(
-            rw.compute_terms(rin, rcfg, self.dt),
-            rcfg.scales,
-            self.dt,
-            float(rcfg.get("overall_scale", added_default("reward.overall_scale"))),
+            rw.compute_terms(rin, sr, self.dt), dict(sr.scales), self.dt, sr.overall_scale
         )
         clip = self.spec.clip_reward
         terms = {k: jp.clip(v, -clip, clip) for k, v in terms.items()}
         valid = 1.0 - diverged.astype(jp.float32)
-        reward = rw.total_reward(terms, self.spec.only_positive, valid)
+        reward = rw.total_reward(terms, sr.only_positive, valid)
         dist = jp.linalg.norm(task.goal - base_pos[:2])
-        success = (ends.truncated & (dist < self.spec.success_radius_m)).astype(jp.float32)
+        success = (ends.truncated & (dist < sr.success_radius_m)).astype(jp.float32)
         return reward, terms, success, dist
 
     def _auto_reset(self, key_reset, d, task: TaskState, action, step, success, ends: Ends, rng):
@@ -676,7 +482,7 @@ class AnymalToFEnv(Env):
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
         metrics.update({k: zero for k in EPISODE_METRICS + STEP_METRICS})
         info = {"task": task, "sensor": sensor_state, "truncation": zero}
-        if self.spec.guidance_decay[1] > 0:  # static: count this env's steps for the decay
+        if self.spec.reward.guidance_decay[1] > 0:  # static: count this env's steps for the decay
             info[ENV_STEPS_KEY] = jp.zeros((), jp.int32)
         return State(
             pipeline_state=d,
@@ -691,7 +497,7 @@ class AnymalToFEnv(Env):
         """Physics state and task state of a fresh episode on tile (level, col) (no sensing)."""
         key_sg, key_par, key_pose, key_rng = jax.random.split(key, 4)
         spawn, goal = sample_spawn_goal(key_sg, self.tmap, level, col)
-        params = sample_episode_params(key_par, self.cfg.env.randomization, self._push_interval)
+        params = sample_episode_params(key_par, self.spec.randomization, self._push_interval)
         # Initial pose: nominal stance, joint noise ~ U(+-init_joint_noise_rad) (wider in stage 2).
         kq, kr = jax.random.split(key_pose)
         jn = self.spec.init_joint_noise_rad
@@ -740,12 +546,13 @@ class AnymalToFEnv(Env):
         5 m) + goal direction in the base frame (2, unit) + time left (1, fraction) + last
         action (12); with ``env.actor_terrain`` (a teacher) also the true terrain heights
         around each foot (4 x 9, as the critic's) and the base scan up to 0.6 m ahead (117, the
-        first ACTOR_SCAN_ROWS rows of the critic's).
+        first ACTOR_SCAN_ROWS rows of the critic's); the layout: foottof.envs.observations.
         Critic ``privileged_state``: the same without noise (true readings, joints, velocities)
         + true terrain heights around each foot relative to the foot centre (4 x 9, 10 cm grid)
         + foot contacts (4) + friction (1) + added base mass (1, x0.1) + with
         ``env.critic_height_scan``, the terrain heights relative to the base at
-        :func:`critic_scan_points` (171, base-yaw frame, clipped to +-1 m).
+        :func:`~foottof.envs.observations.critic_scan_points` (171, base-yaw frame, clipped to
+        +-1 m).
         """
         p = task.params
         qpos, qvel = d.qpos, d.qvel
@@ -762,45 +569,31 @@ class AnymalToFEnv(Env):
         goal_feats = jp.concatenate([jp.minimum(dist, 5.0)[None], direction, time_left[None]])
 
         def actor(tof, valid, q_in, qd_in, lin, ang):
-            return jp.concatenate(
-                [
-                    tof.reshape(-1),  # F sensors x Z zones [m]
-                    valid.reshape(-1),  # F x Z {0, 1}
-                    sense.age_s,  # F frame ages [s]
-                    q_in - self._default_q,  # 12 joint positions rel. to default [rad]
-                    qd_in * 0.05,  # 12 joint velocities [rad/s] scaled
-                    gravity,  # 3 projected gravity
-                    lin,  # 3 base linear velocity estimate [m/s]
-                    ang * 0.25,  # 3 base angular velocity estimate [rad/s] scaled
-                    goal_feats,  # 4 goal distance [m], direction (2), time left
-                    task.last_action,  # 12
-                ]
-            )
+            return obs_lib.actor_observation(
+                tof, valid, sense.age_s, q_in, qd_in, gravity, lin, ang, goal_feats,
+                task.last_action, self._default_q,
+            )  # fmt: skip
 
         state_obs = actor(sense.distance, sense.valid, meas.q, qd_meas, meas.lin_vel, meas.ang_vel)
         clean = actor(sense.true_distance, sense.true_valid, qpos[7:19], qd, lin_b, qvel[3:6])
         fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
-        offs = jp.array(
-            [[dx, dy] for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1)], jp.float32
-        )
-        pts = fk.foot_pos[:, None, :2] + offs[None]  # (4, 9, 2)
-        heights = self.hfield.height_at(pts) - fk.foot_pos[:, None, 2]  # rel. to foot centre
+        patches = obs_lib.foot_patches(self.hfield.height_at, fk.foot_pos)
         contact = self._contact(fk.foot_pos)
         parts = [
             clean,
-            jp.clip(heights.reshape(-1), -1.0, 1.0),  # 4 feet x 9 heights [m]
+            patches,  # 4 feet x 9 heights [m]
             contact,  # 4
             p.friction[None],  # 1
             p.added_mass_kg[None] * 0.1,  # 1
         ]
         scan = None
         if self.spec.critic_height_scan or self.spec.actor_terrain:  # static
-            scan = critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat)  # 171
+            scan = obs_lib.critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat)  # 171
         if self.spec.critic_height_scan:
             parts.append(scan)
         priv = jp.concatenate(parts)
         if self.spec.actor_terrain:  # static: a teacher's actor also sees the terrain, true
-            state_obs = jp.concatenate([state_obs, parts[1], scan[:ACTOR_SCAN_POINTS]])
+            state_obs = jp.concatenate([state_obs, patches, scan[: obs_lib.ACTOR_SCAN_POINTS]])
         lim = self.spec.clip_observations
         return {
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jp
 from flax import struct
@@ -35,21 +37,60 @@ class EpisodeParams:
     push_step: jax.Array
 
 
+@dataclasses.dataclass(frozen=True)
+class RandomizationSpec:
+    """The ``env.randomization`` section, read once (``RandomizationSpec.from_config``): ranges
+    are (lo, hi) tuples; what :func:`sample_episode_params` and the env's push read."""
+
+    enabled: bool  # per-episode domain randomization on/off
+    nominal_friction: float  # foot friction when randomization is off [-]
+    friction_range: tuple[float, float]  # [-]
+    added_mass_kg_range: tuple[float, float]  # [kg]
+    motor_strength_range: tuple[float, float]  # [-]
+    kp_scale_range: tuple[float, float]  # [-]
+    kd_scale_range: tuple[float, float]  # [-]
+    joint_pos_noise_rad: float  # upper end of the per-episode noise std [rad]
+    joint_vel_noise_rads: float  # upper end of the per-episode noise std [rad/s]
+    push_vel_mps: float  # push: base velocity change ~ U(+-this) per horizontal axis [m/s]
+    joint_offset_rad: float  # static offset on all joint readings (evaluation only) [rad]
+    odometry_level: float  # multiple of the 100 % odometry noise [-]
+
+    @classmethod
+    def from_config(cls, rcfg) -> RandomizationSpec:
+        pair = lambda v: (float(v[0]), float(v[1]))  # noqa: E731
+        return cls(
+            enabled=bool(rcfg.enabled),
+            nominal_friction=float(rcfg.nominal_friction),
+            friction_range=pair(rcfg.friction_range),
+            added_mass_kg_range=pair(rcfg.added_mass_kg_range),
+            motor_strength_range=pair(rcfg.motor_strength_range),
+            kp_scale_range=pair(rcfg.kp_scale_range),
+            kd_scale_range=pair(rcfg.kd_scale_range),
+            joint_pos_noise_rad=float(rcfg.joint_pos_noise_rad),
+            joint_vel_noise_rads=float(rcfg.joint_vel_noise_rads),
+            push_vel_mps=float(rcfg.push_vel_mps),
+            joint_offset_rad=float(rcfg.joint_offset_rad),
+            odometry_level=float(rcfg.odometry_level),
+        )
+
+
 def _u(key, lo_hi) -> jax.Array:
     lo, hi = lo_hi
     return jax.random.uniform(key, (), minval=lo, maxval=hi)
 
 
-def sample_episode_params(key: jax.Array, rcfg, push_interval_steps: int) -> EpisodeParams:
+def sample_episode_params(
+    key: jax.Array, rcfg: RandomizationSpec, push_interval_steps: int
+) -> EpisodeParams:
     """Draws one env's parameters.
 
     Args:
       key: PRNG key.
-      rcfg: the `env.randomization` config section (ranges are (lo, hi) tuples).
+      rcfg: the ``env.randomization`` section (RandomizationSpec.from_config).
       push_interval_steps: mean control steps between pushes (static).
     """
     keys = jax.random.split(key, 9)
-    enabled = bool(rcfg.enabled)
+    enabled = rcfg.enabled
 
     def draw(k, rng, nominal):
         return _u(k, rng) if enabled else jp.asarray(nominal, jp.float32)

@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import jax
 import jax.numpy as jp
 from flax import struct
 
-from foottof.renames import ADDED_FIELDS, added_default
+from foottof import config_check
+from foottof.renames import ADDED_FIELDS, read_added
 
 # Terms that are rates (multiplied by the control dt) vs. events (counted once).
 DENSE_TERMS = (
@@ -26,6 +29,66 @@ DENSE_TERMS = (
 )
 SPARSE_TERMS = ("reach", "termination")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
+
+
+@dataclasses.dataclass(frozen=True)
+class RewardSpec:
+    """The ``reward`` section, read once (``RewardSpec.from_config(cfg.reward)``; a field a config
+    saved before it existed lacks takes its old-behaviour default, renames.ADDED_FIELDS): what
+    the env's phases and :func:`compute_terms` read, not the config."""
+
+    success_radius_m: float  # ending within this distance of the goal is a success [m]
+    guidance_max_speed_mps: float
+    guidance_peaked: bool
+    guidance_goal_pay: bool
+    guidance_decay: tuple[int, int]  # (start, end) training iteration; end 0: no decay
+    task_window_s: float
+    stall_toward_goal: bool
+    stall_speed_mps: float
+    stall_grace_s: float
+    jump_grace_s: float
+    edge_radius_m: float
+    edge_height_m: float
+    clearance_target_m: float
+    overall_scale: float  # multiplies every scaled term
+    only_positive: bool
+    scales: tuple[tuple[str, float], ...]  # (term, scale) in REWARD_TERMS order
+
+    def __post_init__(self):
+        start, end = self.guidance_decay  # the rule lives in foottof.config_check
+        config_check.check_fields(
+            "reward",
+            {"guidance_decay_start_iteration": start, "guidance_decay_end_iteration": end},
+        )
+
+    @classmethod
+    def from_config(cls, rcfg) -> RewardSpec:
+        check_scales(rcfg.scales)
+        return cls(
+            success_radius_m=float(rcfg.success_radius_m),
+            guidance_max_speed_mps=float(rcfg.guidance_max_speed_mps),
+            guidance_peaked=bool(read_added(rcfg, "reward.guidance_peaked")),
+            guidance_goal_pay=bool(read_added(rcfg, "reward.guidance_goal_pay")),
+            guidance_decay=(
+                int(read_added(rcfg, "reward.guidance_decay_start_iteration")),
+                int(read_added(rcfg, "reward.guidance_decay_end_iteration")),
+            ),
+            task_window_s=float(read_added(rcfg, "reward.task_window_s")),
+            stall_toward_goal=bool(read_added(rcfg, "reward.stall_toward_goal")),
+            stall_speed_mps=float(rcfg.stall_speed_mps),
+            stall_grace_s=float(rcfg.stall_grace_s),
+            jump_grace_s=float(rcfg.jump_grace_s),
+            edge_radius_m=float(rcfg.edge_radius_m),
+            edge_height_m=float(rcfg.edge_height_m),
+            clearance_target_m=float(read_added(rcfg, "reward.clearance_target_m")),
+            overall_scale=float(read_added(rcfg, "reward.overall_scale")),
+            only_positive=bool(rcfg.only_positive),
+            scales=tuple((name, scale_of(rcfg.scales, name)) for name in REWARD_TERMS),
+        )
+
+    def scale(self, name: str) -> float:
+        """The scale of term ``name`` (reward.scales)."""
+        return dict(self.scales)[name]
 
 
 @struct.dataclass
@@ -155,39 +218,38 @@ def goal_distance(x: RewardInputs) -> jax.Array:
     return jp.linalg.norm(x.goal_xy - x.base_pos[:2])
 
 
-def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.Array]:
+def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dict[str, jax.Array]:
     """Unscaled reward terms (each a scalar), keyed by REWARD_TERMS.
 
     Args:
       x: the inputs of this step.
-      rcfg: the `reward` config section (radii, speeds, grace time).
+      spec: the reward section (radii, speeds, grace times; RewardSpec.from_config).
       control_dt_s: control period, used for joint accelerations [s].
     """
     dist = goal_distance(x)
-    at_goal = (dist < rcfg.success_radius_m).astype(jp.float32)
+    at_goal = (dist < spec.success_radius_m).astype(jp.float32)
     to_goal = (x.goal_xy - x.base_pos[:2]) / jp.maximum(dist, 1e-6)
     v_toward = jp.dot(x.base_lin_vel[:2], to_goal)
-    vmax = rcfg.guidance_max_speed_mps
+    vmax = spec.guidance_max_speed_mps
     # Dense guidance: speed toward the goal (clipped); full credit once within the success radius.
     paid = jp.clip(v_toward, -vmax, vmax)
-    peaked = rcfg.get("guidance_peaked", added_default("reward.guidance_peaked"))
-    if peaked:  # static: above vmax the pay falls as it rose
+    if spec.guidance_peaked:  # static: above vmax the pay falls as it rose
         paid = jp.where(v_toward > vmax, jp.maximum(2.0 * vmax - v_toward, -vmax), paid)
-    goal_pay = rcfg.get("guidance_goal_pay", added_default("reward.guidance_goal_pay"))
     # static: full credit within the success radius (the old task), or nothing paid there
-    guidance = jp.where(at_goal > 0, vmax if goal_pay else 0.0, paid) * x.guidance_weight
+    guidance = (
+        jp.where(at_goal > 0, vmax if spec.guidance_goal_pay else 0.0, paid) * x.guidance_weight
+    )
     # Task (Rudin et al. 2022): 1 / (T_r (1 + d^2)) per second, paid only in the last T_r seconds,
     # so the window pays 1 / (1 + d^2) in all however early the goal was reached.
-    window = float(rcfg.get("task_window_s", added_default("reward.task_window_s")))
+    window = spec.task_window_s
     in_window = (x.time_left_s < window - 0.5 * control_dt_s).astype(jp.float32)
     task = in_window / (window * (1.0 + jp.square(dist)))
     # Stall: slow (or, with stall_toward_goal, slow toward the goal: walking about does not
     # count as moving) and outside the success radius, after the grace period.
-    toward = rcfg.get("stall_toward_goal", added_default("reward.stall_toward_goal"))
-    speed = v_toward if toward else jp.linalg.norm(x.base_lin_vel[:2])  # static
-    stalling = (speed < rcfg.stall_speed_mps) & (at_goal == 0) & (x.time_s > rcfg.stall_grace_s)
+    speed = v_toward if spec.stall_toward_goal else jp.linalg.norm(x.base_lin_vel[:2])  # static
+    stalling = (speed < spec.stall_speed_mps) & (at_goal == 0) & (x.time_s > spec.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
-    target = rcfg.get("clearance_target_m", added_default("reward.clearance_target_m"))
+    target = spec.clearance_target_m
     return {
         "reach": x.truncated * at_goal,
         "termination": x.failed,
@@ -200,7 +262,7 @@ def compute_terms(x: RewardInputs, rcfg, control_dt_s: float) -> dict[str, jax.A
         "orientation": jp.sum(jp.square(x.projected_gravity[:2])),
         "stall": stalling.astype(jp.float32),
         # all feet off the ground, once the spawn drop (env.spawn_height_offset_m) has landed
-        "jump": (jp.all(x.foot_contact < 0.5) & (x.time_s > rcfg.jump_grace_s)).astype(jp.float32),
+        "jump": (jp.all(x.foot_contact < 0.5) & (x.time_s > spec.jump_grace_s)).astype(jp.float32),
         "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
         "collision": jp.sum(x.knee_contact),
         "foot_edge": jp.sum(x.foot_edge),

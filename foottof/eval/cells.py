@@ -7,7 +7,7 @@ A robustness figure at the paper's ensemble is hours of CPU (1000 episodes per c
 matches instead of running them, and removes the cell files once the results files are written.
 
 A cell is reused only when everything that decides its outcomes is equal: the policy files
-(checkpoint.policy_digest), the episode draws (results.episode_draws: seed, batch size, episode
+(integrity.policy_digest), the episode draws (results.episode_draws: seed, batch size, episode
 count, config fingerprint) and the action mode (mean or sampled). Anything else (another
 checkpoint, seed, episode count or config value) runs the cell again and replaces the file.
 """
@@ -30,7 +30,7 @@ def cell_identity(policy: str, draws: dict, deterministic: bool) -> dict:
     """What must be equal for a stored cell to stand for a new run of it.
 
     Args:
-      policy: checkpoint.policy_digest of the evaluated checkpoint, or "untrained".
+      policy: integrity.policy_digest of the evaluated checkpoint, or "untrained".
       draws: results.episode_draws of the config.
       deterministic: eval.deterministic (mean actions).
     """

@@ -195,7 +195,7 @@ def run(
     import jax
     import jax.numpy as jp
 
-    from foottof.envs.anymal_tof import foot_gap_depth
+    from foottof.envs.stuck_probe import foot_gap_depth
     from foottof.eval.harness import make_eval_env_and_policy
     from foottof.robot.kinematics import world_foot_kinematics
     from foottof.sensors import tof

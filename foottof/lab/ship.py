@@ -15,7 +15,7 @@ import argparse
 import os
 import shutil
 
-from foottof.ppo.checkpoint import INTEGRITY_FILE, integrity_problem, write_integrity
+from foottof.ppo.integrity import INTEGRITY_FILE, integrity_problem, write_integrity
 from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 from foottof.ppo.runner import trim_metrics
 

@@ -7,21 +7,17 @@ as a flat dict {'leaf_0000': array, ...} in jax.tree_util flatten order; the man
 leaves (`jax.tree_util.keystr`), so any pytree (flax structs, optax states, MJX data) round-trips
 and a mismatch error names the leaf. Orbax writes into a temporary folder and renames it when done.
 
-Damage. Orbax reads only the byte ranges a restore needs and checks nothing else, so a truncated
-or missing file can go unnoticed or surface as a TensorStore error deep in a traceback. Each
-checkpoint therefore also holds INTEGRITY_FILE: the size and SHA-256 of every file in it, written
-(atomically, by process 0 of a multi-process run) after orbax finished. A checkpoint whose files
-do not match it, or that orbax cannot read, is *unreadable* (:class:`CheckpointUnreadable`, one
-line naming the path and the cause); one whose leaves differ from the model *does not fit*
-(:class:`CheckpointMismatch`, a ValueError). ``Checkpointer.restore`` falls back to the newest
+Damage. Each checkpoint also holds the size and SHA-256 of every file in it (foottof.ppo.integrity,
+written after orbax finished). A checkpoint whose files do not match that record, or that orbax
+cannot read, is *unreadable* (:class:`CheckpointUnreadable`, one line naming the path and the
+cause); one whose leaves differ from the model *does not fit* (:class:`CheckpointMismatch`, a
+ValueError). ``Checkpointer.restore`` falls back to the newest
 checkpoint that reads; checkpoints written before the record existed are checked by reading them
-only.
+only. A network with more inputs than the saved one restores it grown (foottof.ppo.input_growth).
 """
 
 import contextlib
 import gc
-import hashlib
-import json
 import os
 import shutil
 import sys
@@ -31,6 +27,8 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
+from foottof.ppo import input_growth as growth
+from foottof.ppo.integrity import integrity_problem, write_integrity
 from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 from foottof.ppo.train import TrainState
 
@@ -118,9 +116,6 @@ def _unflatten(target: Any, flat: dict, saved_manifest: list | None = None) -> A
     return jax.tree.unflatten(treedef, leaves)
 
 
-INTEGRITY_FILE = "foottof_files.json"  # in each checkpoint's step folder: sizes and SHA-256
-
-
 class CheckpointUnreadable(RuntimeError):
     """A checkpoint that cannot be read completely (damaged, partial copy, missing files); the
     message is one line naming the path and the cause."""
@@ -128,79 +123,6 @@ class CheckpointUnreadable(RuntimeError):
 
 class CheckpointMismatch(ValueError):
     """A readable checkpoint whose leaves do not fit the model (names the leaf and shapes)."""
-
-
-def _sha256(path: str) -> str:
-    with open(path, "rb") as fh:
-        return hashlib.sha256(fh.read()).hexdigest()
-
-
-def _file_digests(step_dir: str) -> dict[str, list]:
-    out = {}
-    for root, _, files in os.walk(step_dir):
-        for f in sorted(files):
-            path = os.path.join(root, f)
-            rel = os.path.relpath(path, step_dir)
-            if rel in (INTEGRITY_FILE, INTEGRITY_FILE + ".tmp"):
-                continue
-            out[rel] = [os.path.getsize(path), _sha256(path)]
-    return out
-
-
-def write_integrity(step_dir: str) -> None:
-    """Records the size and SHA-256 of every file of a finished checkpoint (atomic write)."""
-    files = _file_digests(step_dir)
-    tmp = os.path.join(step_dir, INTEGRITY_FILE + ".tmp")
-    with open(tmp, "w") as f:
-        json.dump({"version": 1, "files": files}, f, indent=0)
-    os.replace(tmp, os.path.join(step_dir, INTEGRITY_FILE))
-
-
-def policy_digest(path: str) -> str:
-    """SHA-256 (16 hex digits) of the policy files (params and normalizer) of the checkpoint an
-    evaluation loads from ``path`` (a run directory, its checkpoints/ folder or one step folder;
-    the latest finished step, as load_params_and_normalizer): equal digests, equal policies.
-
-    Raises:
-      FileNotFoundError if there is no finished checkpoint there."""
-    path = os.path.abspath(path)
-    if os.path.isdir(os.path.join(path, CHECKPOINT_SUBDIR)):
-        path = os.path.join(path, CHECKPOINT_SUBDIR)
-    if not (os.path.basename(path).isdigit() and os.path.isdir(path)):
-        steps = [int(d) for d in os.listdir(path) if d.isdigit()] if os.path.isdir(path) else []
-        if not steps:
-            raise FileNotFoundError(f"no checkpoint found in {path}")
-        path = os.path.join(path, str(max(steps)))
-    files = _file_digests(path)
-    kept = {k: v for k, v in files.items() if k.split(os.sep)[0] in ("params", "normalizer")}
-    if not kept:
-        raise FileNotFoundError(f"{path}: no params/normalizer files")
-    return hashlib.sha256(json.dumps(kept, sort_keys=True).encode()).hexdigest()[:16]
-
-
-def integrity_problem(step_dir: str) -> str | None:
-    """Why the files of checkpoint folder ``step_dir`` do not match its integrity record (None:
-    they match, or the checkpoint predates the record)."""
-    record = os.path.join(step_dir, INTEGRITY_FILE)
-    if not os.path.isdir(step_dir):
-        return "the checkpoint folder is missing"
-    if not os.path.exists(record):
-        return None
-    try:
-        with open(record) as f:
-            expected = json.load(f)["files"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        return f"its file list {INTEGRITY_FILE} is garbled ({type(e).__name__})"
-    for rel, (size, digest) in sorted(expected.items()):
-        path = os.path.join(step_dir, rel)
-        if not os.path.isfile(path):
-            return f"file {rel} is missing"
-        actual = os.path.getsize(path)
-        if actual != size:
-            return f"file {rel} has {actual} bytes, {size} were written (truncated or partial copy)"
-        if _sha256(path) != digest:
-            return f"file {rel} differs from what was written (corrupted)"
-    return None
 
 
 @contextlib.contextmanager
@@ -308,8 +230,8 @@ class Checkpointer:
         Without `step`, each newer checkpoint that is unreadable is skipped with a one-line
         warning naming it and the cause.
 
-        A model whose network reads more inputs than the saved one (_INPUT_LEAVES, e.g.
-        network.obs_skip heads) gets the saved kernels with zero rows for the new inputs, and
+        A model whose network reads more inputs than the saved one (input_growth.INPUT_LEAVES,
+        e.g. network.obs_skip heads) gets the saved kernels with zero rows for the new inputs, and
         zero Adam moments for them: it acts as the saved one did.
 
         Returns:
@@ -370,8 +292,10 @@ class Checkpointer:
         grown, saved_like = {}, {}
         for item in items:
             sub = _sub(target, item)
-            grown[item] = _grown_leaves(manifest[item], sub) if item in _GROWABLE_ITEMS else {}
-            saved_like[item] = _shaped_as_saved(sub, grown[item])
+            grown[item] = (
+                growth.grown_leaves(manifest[item], sub) if item in growth.GROWABLE_ITEMS else {}
+            )
+            saved_like[item] = growth.shaped_as_saved(sub, grown[item])
             check_compatible(item, manifest[item], saved_like[item], f"checkpoint {step}")
         args = {
             i: ocp.args.StandardRestore(_abstract(saved_like[i], manifest[i], with_extra=True))
@@ -386,7 +310,7 @@ class Checkpointer:
         for item in items:
             tree = _unflatten(saved_like[item], restored[item], manifest[item])
             if grown[item]:
-                tree = _grow_tree(tree, _sub(target, item), grown[item])
+                tree = growth.grow_tree(tree, _sub(target, item), grown[item])
                 print(
                     f"[checkpoint] {item}: inputs grown on {len(grown[item])} leaves "
                     f"(new inputs start with zero weight)"
@@ -396,98 +320,6 @@ class Checkpointer:
 
     def close(self) -> None:
         self._manager.close()
-
-
-# Leaves whose first axis is a network's input: when a run adds inputs at the end (critic
-# inputs such as env.critic_height_scan; network.obs_skip's observation beside the LSTM output),
-# init_from or a resume from a run without them grows these along their first axis (the names
-# match inside params, the optimizer's moments and the normalizer alike).
-_INPUT_LEAVES = (
-    "['memory_c']['lstm_0']['ii']['kernel']",
-    "['memory_c']['lstm_0']['if']['kernel']",
-    "['memory_c']['lstm_0']['ig']['kernel']",
-    "['memory_c']['lstm_0']['io']['kernel']",
-    "['critic']['dense_0']['kernel']",  # the critic head's first layer (mlp policy, obs_skip)
-    "['actor']['dense_0']['kernel']",  # the actor head's first layer (mlp policy, obs_skip)
-    "['privileged_state']",  # normalizer mean / std / summed_variance
-)
-# The actor's inputs: grown only on request (init_from into env.actor_terrain, a teacher started
-# from a sensor-only policy); anywhere else an actor of another layout is an error.
-_ACTOR_INPUT_LEAVES = (
-    "['memory_a']['lstm_0']['ii']['kernel']",
-    "['memory_a']['lstm_0']['if']['kernel']",
-    "['memory_a']['lstm_0']['ig']['kernel']",
-    "['memory_a']['lstm_0']['io']['kernel']",
-    "['state']",  # normalizer mean / std / summed_variance
-)
-_GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, not 'rollout'
-
-
-def _shaped_as_saved(target: Any, grown: dict[str, tuple]) -> Any:
-    """`target` with the leaves in `grown` ({name: saved shape}) as abstract arrays of the
-    saved shape (what the checkpoint holds)."""
-    return jax.tree_util.tree_map_with_path(
-        lambda p, x: (
-            jax.ShapeDtypeStruct(grown[jax.tree_util.keystr(p)], x.dtype)
-            if jax.tree_util.keystr(p) in grown
-            else x
-        ),
-        target,
-    )
-
-
-def _grow_tree(tree: Any, target: Any, grown: dict[str, tuple]) -> Any:
-    """The restored `tree` with its `grown` leaves embedded in `target`'s shapes (_grow; a
-    normalizer's new entries get the variance-1 summed variance of its sample count)."""
-    count = 0.0
-    if "normalizer" in tree:
-        c = tree["normalizer"].count
-        count = float(np.asarray(getattr(c, "hi", 0))) * 2.0**32 + float(
-            np.asarray(getattr(c, "lo", c))
-        )
-    return jax.tree_util.tree_map_with_path(
-        lambda p, x, t: (
-            jax.numpy.asarray(_grow(jax.tree_util.keystr(p), x, np.shape(t), count))
-            if jax.tree_util.keystr(p) in grown
-            else x
-        ),
-        tree,
-        target,
-    )
-
-
-def _grown_leaves(saved_manifest: list, target: Any, actor: bool = False) -> dict[str, tuple]:
-    """{leaf name: saved shape} of input leaves (_INPUT_LEAVES, and _ACTOR_INPUT_LEAVES if
-    ``actor``) the checkpoint holds with fewer inputs (a shorter first axis, the rest equal) than
-    `target`."""
-    leaves = _INPUT_LEAVES + (_ACTOR_INPUT_LEAVES if actor else ())
-    saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
-    out = {}
-    for path, x in jax.tree_util.tree_flatten_with_path(target)[0]:
-        name = jax.tree_util.keystr(path)
-        old, new = saved.get(name), tuple(np.shape(x))
-        if (
-            old is not None
-            and any(k in name for k in leaves)
-            and len(old) == len(new) >= 1
-            and old[0] < new[0]
-            and old[1:] == new[1:]
-        ):
-            out[name] = old
-    return out
-
-
-def _grow(name: str, value: Any, shape: tuple, count: float) -> np.ndarray:
-    """`value` embedded in `shape` along axis 0: new kernel rows 0 (new inputs start unused),
-    new normalizer entries mean 0, std 1 and summed variance `count` (variance 1)."""
-    value = np.asarray(value)
-    fill = 0.0
-    if ".std[" in name:
-        fill = 1.0
-    elif ".summed_variance[" in name:
-        fill = count
-    pad = np.full((shape[0] - value.shape[0], *value.shape[1:]), fill, value.dtype)
-    return np.concatenate([value, pad], axis=0)
 
 
 def load_params_and_normalizer(
@@ -544,8 +376,8 @@ def load_params_and_normalizer(
         for item, sub in target.items():
             if item not in manifest:
                 raise CheckpointUnreadable(f"{step_dir}: the checkpoint has no {item!r} item")
-            grown[item] = _grown_leaves(manifest[item], sub, grow_actor) if grow else {}
-            saved_like[item] = _shaped_as_saved(sub, grown[item])
+            grown[item] = growth.grown_leaves(manifest[item], sub, grow_actor) if grow else {}
+            saved_like[item] = growth.shaped_as_saved(sub, grown[item])
             check_compatible(
                 item, manifest[item], saved_like[item], f"init_from {directory}/{step}"
             )
@@ -561,7 +393,7 @@ def load_params_and_normalizer(
     for item, sub in target.items():
         tree = _unflatten(saved_like[item], restored[item])
         if grown[item]:
-            tree = _grow_tree(tree, sub, grown[item])
+            tree = growth.grow_tree(tree, sub, grown[item])
             print(
                 f"[init_from] {item}: inputs grown on {len(grown[item])} leaves "
                 f"(new inputs start with zero weight)"

@@ -156,7 +156,7 @@ def deployment_metadata(cfg, env, checkpoint: str | None) -> dict:
     """What a controller needs besides the weights: observation layout, action scale and clip,
     default joint positions, control rate, the checkpoint (JSON-serializable)."""
     from foottof import constants
-    from foottof.envs.anymal_tof import actor_obs_layout
+    from foottof.envs.observations import actor_obs_layout
 
     layout = actor_obs_layout(env.sensing.num_sensors, env.sensing.num_zones)
     return {

@@ -12,7 +12,7 @@ import ml_collections
 from brax.training.acme import running_statistics
 
 from foottof import config_check, limits
-from foottof.renames import added_default
+from foottof.renames import read_added
 
 Carry = (
     Any  # {'actor': ((c, h), ...), 'critic': ((c, h), ...)} per LSTM layer, each (B, H); () for MLP
@@ -254,8 +254,8 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
     """Builds the actor-critic from c.network (see configs/_ppo.py)."""
     n = network_cfg
     config_check.check_sections({"network": n}, ("network",))  # the rules, held there once
-    max_std = float(n.get("max_noise_std", 0.0))
-    obs_skip = bool(n.get("obs_skip", added_default("network.obs_skip")))
+    max_std = float(read_added(n, "network.max_noise_std"))
+    obs_skip = bool(read_added(n, "network.obs_skip"))
     if obs_skip and n.policy != "lstm":
         raise ValueError(
             f"network.obs_skip=True needs network.policy='lstm' (got {n.policy!r}: an MLP "

@@ -10,6 +10,8 @@ import os
 import shutil
 import time
 
+from foottof.renames import read_added
+
 CHECKPOINT_SUBDIR = "checkpoints"  # <run_dir>/checkpoints/<iteration>/ (foottof.ppo.checkpoint)
 SHIPPED_POLICY_DIRS = ("policies/latest",)  # checked (relative to the repo root) before runs/
 
@@ -184,5 +186,5 @@ def with_run_network(cfg, checkpoint: str | None):
             if k in c.network:
                 c.network[k] = tuple(v) if isinstance(v, list) else v
         for k in RUN_INPUT_FIELDS:
-            c.env[k] = bool(saved.get("env", {}).get(k, False))
+            c.env[k] = bool(read_added(saved.get("env", {}), f"env.{k}"))
     return c

@@ -338,7 +338,7 @@ def _run(
                 state.params,
                 state.normalizer,
                 # a teacher (env.actor_terrain) may start from a sensor-only policy
-                grow_actor=bool(cfg.get("env", {}).get("actor_terrain", False)),
+                grow_actor=bool(renames.read_added(cfg.get("env", {}), "env.actor_terrain")),
             )
         except ckpt.CheckpointUnreadable as e:
             checkpointer.close()

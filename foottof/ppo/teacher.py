@@ -14,6 +14,7 @@ import jax.numpy as jp
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import networks as net
 from foottof.ppo.distill import TeacherEnv, student_from_teacher
+from foottof.renames import read_added
 
 
 def load_teacher(path: str, env, network_cfg):
@@ -77,11 +78,11 @@ def make_distill_env(cfg):
     ``cfg.train.teacher``, and the init function cuts the student from the teacher
     (:func:`student_from_teacher`; used where the run has no train.init_from)."""
     from foottof.envs import make_training_env
-    from foottof.envs.anymal_tof import ACTOR_TERRAIN_INPUTS
+    from foottof.envs.observations import ACTOR_TERRAIN_INPUTS
 
     path = str(cfg.train.teacher)
     check_teacher_path(path)
-    if cfg.env.get("actor_terrain", False):
+    if read_added(cfg.env, "env.actor_terrain"):
         raise ValueError(
             "env.actor_terrain=True in a distillation config: the config is the student's "
             "(sensors only); the teacher's terrain inputs are added for it"

@@ -10,6 +10,8 @@ Every leaf of the batched State must have the env axis first (it is sharded over
 auto-resets itself (our locomotion env); both live in foottof.envs.wrappers (re-exported here).
 """
 
+import dataclasses
+import functools
 import math
 from collections.abc import Callable
 from typing import Any, NamedTuple
@@ -29,6 +31,7 @@ from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-expor
 from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
 from foottof.ppo import distill, losses
 from foottof.ppo import networks as net
+from foottof.renames import read_added
 
 AXIS = "data"  # mesh axis over envs (all devices of all hosts)
 
@@ -93,9 +96,10 @@ class Train(NamedTuple):
 
 
 def _validate(cfg: ml_collections.ConfigDict, num_devices: int) -> None:
-    """The ppo / network rules of foottof.config_check (held there once), and the one rule that
-    needs the devices: whole minibatches of envs on every device."""
-    config_check.check_sections(cfg, ("ppo", "network"))
+    """The ppo rules of foottof.config_check (held there once; the network's are checked by
+    net.make_networks, which builds it), and the one rule that needs the devices: whole
+    minibatches of envs on every device."""
+    config_check.check_sections(cfg, ("ppo",))
     ppo = cfg.ppo
     if ppo.num_envs % num_devices:
         raise ValueError(
@@ -136,6 +140,327 @@ def adapt_learning_rate(lr, kl, desired_kl: float, lr_min: float, lr_max: float)
     return jp.where((kl < 0.5 * desired_kl) & (kl > 0.0), jp.minimum(lr * 1.5, lr_max), lr)
 
 
+@dataclasses.dataclass(frozen=True)
+class Settings:
+    """The static numbers of one iteration, read once from c.ppo (and c.train.teacher)."""
+
+    num_steps: int  # rollout length per env
+    num_minibatches: int  # per epoch, split along the env axis
+    num_epochs: int
+    gamma: float
+    gae_lambda: float
+    normalize_advantage: bool
+    adaptive_lr: bool  # ppo.lr_schedule == "adaptive": the rsl_rl KL rule (adapt_learning_rate)
+    desired_kl: float
+    lr_min: float
+    lr_max: float
+    clip_param: float
+    value_loss_coef: float
+    entropy_coef: float
+    use_clipped_value_loss: bool
+    distilling: bool  # train.teacher set: the imitation loss (foottof.ppo.distill) replaces PPO's
+
+    @classmethod
+    def from_config(cls, cfg: ml_collections.ConfigDict) -> "Settings":
+        ppo = cfg.ppo
+        train_cfg = cfg.get("train", None)
+        return cls(
+            num_steps=int(ppo.num_steps),
+            num_minibatches=int(ppo.num_minibatches),
+            num_epochs=int(ppo.num_epochs),
+            gamma=float(ppo.gamma),
+            gae_lambda=float(ppo.gae_lambda),
+            normalize_advantage=bool(ppo.normalize_advantage),
+            adaptive_lr=ppo.lr_schedule == "adaptive",
+            desired_kl=float(ppo.desired_kl),
+            lr_min=float(ppo.lr_min),
+            lr_max=float(ppo.lr_max),
+            clip_param=float(ppo.clip_param),
+            value_loss_coef=float(ppo.value_loss_coef),
+            entropy_coef=float(ppo.entropy_coef),
+            use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
+            distilling=bool(train_cfg is not None and read_added(train_cfg, "train.teacher")),
+        )
+
+    def loss_kwargs(self) -> dict:
+        """The keyword arguments of losses.ppo_loss."""
+        return dict(
+            clip_param=self.clip_param,
+            value_loss_coef=self.value_loss_coef,
+            entropy_coef=self.entropy_coef,
+            use_clipped_value_loss=self.use_clipped_value_loss,
+        )
+
+
+# The functions of one iteration, each callable alone. Those that take a mesh axis (`local_*`,
+# `sgd_step`) run on one device's share of the envs inside `jax.shard_map` (or `jax.vmap` with
+# ``axis_name=AXIS``): their collectives reduce over AXIS.
+
+
+def init_state(env, networks: net.Networks, optimizer, mesh: Mesh, num_envs: int, obs_example, key):
+    """A fresh TrainState: network, optimizer and normalizer initialized, every env reset.
+
+    Args:
+      obs_example: an observation with a batch axis of 1 (shapes the network's inputs).
+      key: (2,) PRNG key; split into the params, the env resets and the next iteration's key.
+    """
+    key_params, key_env, key_next = jax.random.split(key, 3)
+    params = networks.init_params(key_params, obs_example)
+    opt_state = optimizer.init(params)
+    normalizer = networks.init_normalizer(obs_example)
+    keys = jax.random.split(key_env, num_envs)  # one reset key per env
+    reset = jax.shard_map(
+        functools.partial(_reset_envs, env, networks),
+        mesh=mesh,
+        in_specs=P(AXIS),
+        out_specs=P(AXIS),
+        check_vma=False,
+    )
+    env_state, carry, prev_done, ep_return, ep_length = reset(keys)
+    return TrainState(
+        params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
+        carry=carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
+        key=key_next, iteration=jp.zeros((), jp.int32),
+    )  # fmt: skip
+
+
+def _reset_envs(env, networks: net.Networks, keys):
+    env_state = env.reset(keys)
+    n = keys.shape[0]
+    return (
+        env_state,
+        networks.init_carry(n),
+        jp.ones((n,), bool),
+        jp.zeros((n,), jp.float32),
+        jp.zeros((n,), jp.float32),
+    )
+
+
+def rollout_step(env, networks: net.Networks, params, normalizer, log_std, carry, key_step):
+    """One env step of the rollout: act ~ N(mean, std), step the envs, book the episode.
+
+    Args:
+      carry: (env_state, LSTM carry, prev_done (N,), ep_return (N,), ep_length (N,)).
+      key_step: (2,) PRNG key of this step's action noise.
+
+    Returns:
+      (the next carry, this step's Transition (leaves (N, ...))).
+    """
+    env_state, net_carry, prev_done, ep_return, ep_length = carry
+    obs = env_state.obs
+    net_carry, mean, _, value = networks.step(params, normalizer, net_carry, obs, prev_done)
+    action = mean + jp.exp(log_std) * jax.random.normal(key_step, mean.shape)  # ~ N(mean, std)
+    log_prob = net.gaussian_log_prob(action, mean, log_std)
+    env_state = env.step(env_state, action)
+    done = env_state.done.astype(bool)
+    reward = env_state.reward.astype(jp.float32)
+    ep_return = ep_return + reward
+    ep_length = ep_length + 1.0
+    tr = Transition(
+        obs=obs, resets=prev_done, actions=action, log_probs=log_prob, means=mean,
+        values=value, rewards=reward, dones=done.astype(jp.float32),
+        truncation=env_state.info["truncation"].astype(jp.float32),
+        finished_return=jp.where(done, ep_return, 0.0),
+        finished_length=jp.where(done, ep_length, 0.0),
+        metrics={k: v.astype(jp.float32) for k, v in env_state.metrics.items()},
+    )  # fmt: skip
+    ep_return = jp.where(done, 0.0, ep_return)
+    ep_length = jp.where(done, 0.0, ep_length)
+    return (env_state, net_carry, done, ep_return, ep_length), tr
+
+
+def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int):
+    """``num_steps`` steps of the envs in `state` under its policy (no collectives).
+
+    Returns:
+      (the carry after the last step (as rollout_step's), Transition with leaves (T, N, ...),
+      (N,) value of the state after the last step).
+    """
+    params, normalizer = state.params, state.normalizer
+    step = functools.partial(
+        rollout_step, env, networks, params, normalizer, networks.action_log_std(params)
+    )
+    carry0 = (state.env_state, state.carry, state.prev_done, state.ep_return, state.ep_length)
+    carry, traj = jax.lax.scan(step, carry0, jax.random.split(key, num_steps))
+    env_state, net_carry, prev_done, _, _ = carry
+    _, _, _, last_value = networks.step(params, normalizer, net_carry, env_state.obs, prev_done)
+    return carry, traj, last_value
+
+
+def sgd_step(networks: net.Networks, optimizer, settings: Settings, carry, mb: losses.Minibatch):
+    """One gradient step on a minibatch, gradients and metrics averaged over AXIS.
+
+    Args:
+      carry: (params, opt_state, normalizer); the normalizer is read, not updated.
+
+    Returns:
+      (the new carry, this step's metrics: the loss's, 'ppo/learning_rate_mean' (the rate this
+      step used) and 'ppo/grad_norm').
+    """
+    params, opt_state, normalizer = carry
+    if settings.distilling:  # static
+        grad_fn = jax.value_and_grad(distill.distill_loss, has_aux=True)
+        (_, metrics), grads = grad_fn(params, networks, normalizer, mb)
+    else:
+        grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
+        (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **settings.loss_kwargs())
+    grads = jax.lax.pmean(grads, AXIS)
+    metrics = jax.lax.pmean(metrics, AXIS)
+    if settings.adaptive_lr:
+        lr = adapt_learning_rate(
+            opt_state.hyperparams["learning_rate"],
+            metrics["ppo/kl"],
+            settings.desired_kl,
+            settings.lr_min,
+            settings.lr_max,
+        )
+        opt_state = _set_learning_rate(opt_state, lr)
+    metrics["ppo/learning_rate_mean"] = opt_state.hyperparams["learning_rate"]  # this update's
+    updates, opt_state = optimizer.update(grads, opt_state, params)
+    params = optax.apply_updates(params, updates)
+    metrics["ppo/grad_norm"] = optax.global_norm(grads)
+    return (params, opt_state, normalizer), metrics
+
+
+def epoch_minibatches(data: losses.Minibatch, key, num_minibatches: int) -> losses.Minibatch:
+    """One epoch's minibatches: the envs shuffled and split, each env's time order kept.
+
+    Args:
+      data: the whole rollout, leaves (T, N, ...) (carry (N, ...), log_std (A,)).
+      key: (2,) PRNG key of the shuffle.
+
+    Returns:
+      Minibatch with a leading minibatch axis: leaves (M, T, N / M, ...) (carry (M, N / M, ...),
+      log_std (M, A)); every env in exactly one minibatch.
+    """
+    n_local = data.advantages.shape[1]
+    perm = jax.random.permutation(key, n_local)  # shuffle envs, keep time order
+    idx = perm.reshape(num_minibatches, n_local // num_minibatches)
+
+    def take(i):
+        return losses.Minibatch(
+            carry=jax.tree.map(lambda x: x[i], data.carry),
+            obs=jax.tree.map(lambda x: x[:, i], data.obs),
+            resets=data.resets[:, i], actions=data.actions[:, i],
+            log_probs=data.log_probs[:, i], means=data.means[:, i], log_std=data.log_std,
+            values=data.values[:, i], advantages=data.advantages[:, i],
+            returns=data.returns[:, i],
+        )  # fmt: skip
+
+    minibatches = jax.vmap(take)(idx)  # leading minibatch axis
+    return minibatches._replace(
+        log_std=jp.broadcast_to(data.log_std, (num_minibatches,) + data.log_std.shape)
+    )
+
+
+def _epoch(sgd, data: losses.Minibatch, num_minibatches: int, carry, key_epoch):
+    return jax.lax.scan(sgd, carry, epoch_minibatches(data, key_epoch, num_minibatches))
+
+
+def local_update(
+    networks: net.Networks, optimizer, settings: Settings, params, opt_state, normalizer,
+    batch: Batch, key_update,
+):  # fmt: skip
+    """The update epochs of one iteration on this device's envs: GAE (advantages normalized
+    over AXIS), num_epochs x num_minibatches sgd_steps, then the normalizer's statistics.
+
+    Args:
+      key_update: (2,) PRNG key, the same on every device (each folds in its index).
+
+    Returns:
+      (params, opt_state, normalizer, metrics with leaves (num_epochs, num_minibatches)).
+    """
+    key_update = jax.random.fold_in(key_update, jax.lax.axis_index(AXIS))
+    traj, carry_start, last_value = batch
+    gamma = settings.gamma
+    rewards = losses.bootstrap_truncation(traj.rewards, traj.values, traj.truncation, gamma)
+    advantages, returns = losses.compute_gae(
+        rewards, traj.values, traj.dones, last_value, gamma, settings.gae_lambda
+    )
+    if settings.normalize_advantage:
+        mean = jax.lax.pmean(jp.mean(advantages), AXIS)
+        var = jax.lax.pmean(jp.mean((advantages - mean) ** 2), AXIS)
+        advantages = (advantages - mean) / (jp.sqrt(var) + 1e-8)
+
+    data = losses.Minibatch(
+        carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
+        log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(params),
+        values=traj.values, advantages=advantages, returns=returns,
+    )  # fmt: skip
+    sgd = functools.partial(sgd_step, networks, optimizer, settings)
+    (new_params, opt_state, _), sgd_metrics = jax.lax.scan(
+        functools.partial(_epoch, sgd, data, settings.num_minibatches),
+        (params, opt_state, normalizer),
+        jax.random.split(key_update, settings.num_epochs),
+    )
+    if networks.normalize_observations:  # after the update: the loss used the rollout's stats
+        normalizer = running_statistics.update(
+            normalizer, net.select_obs(traj.obs), pmap_axis_name=AXIS
+        )
+    return new_params, opt_state, normalizer, sgd_metrics
+
+
+def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, state: TrainState):
+    """One iteration on this device's envs: rollout, local_update, metrics reduced over AXIS.
+
+    Returns:
+      (the next TrainState, scalar metrics (see `_iteration_metrics`)).
+    """
+    key, key_rollout, key_update = jax.random.split(state.key, 3)
+    # Each device gets its own rollout stream; the state key stays replicated.
+    key_rollout = jax.random.fold_in(key_rollout, jax.lax.axis_index(AXIS))
+    carry_start = state.carry  # stored initial carry of this rollout (before any reset)
+    (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = rollout(
+        env, networks, state, key_rollout, settings.num_steps
+    )
+    params, opt_state, normalizer, sgd_metrics = local_update(
+        networks,
+        optimizer,
+        settings,
+        state.params,
+        state.opt_state,
+        state.normalizer,
+        Batch(traj, carry_start, last_value),
+        key_update,
+    )
+    metrics = _iteration_metrics(
+        traj, sgd_metrics, networks.action_log_std(params), params, opt_state
+    )
+    new_state = TrainState(
+        params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
+        carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
+        key=key, iteration=state.iteration + 1,
+    )  # fmt: skip
+    return new_state, metrics
+
+
+def _tree_spec(tree_spec, like):
+    """Broadcasts each TrainState field's PartitionSpec to all leaves of that field."""
+    return jax.tree.map(
+        lambda s, sub: jax.tree.map(lambda _: s, sub),
+        tree_spec,
+        like,
+        is_leaf=lambda x: isinstance(x, P),
+    )
+
+
+def _check_env(env_shape, num_envs: int) -> None:
+    """The env's batched State has the env axis first, a truncation flag and no metric under a
+    trainer prefix."""
+    _check_env_state(env_shape, num_envs)
+    for name in ("truncation",):
+        if name not in env_shape.info:
+            raise ValueError(
+                f"env State.info lacks {name!r} (N,); wrap Brax envs with wrap_brax_env"
+            )
+    clash = {"train/", "loss/", "ppo/"}
+    for k in env_shape.metrics:
+        if any(k.startswith(c) for c in clash):
+            raise ValueError(
+                f"env metric {k!r} clashes with trainer metric prefixes {sorted(clash)}"
+            )
+
+
 def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     """Builds the pure, jitted init and iteration functions.
 
@@ -152,39 +477,14 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     ppo = cfg.ppo
     devices = list(jax.devices() if devices is None else devices)
     _validate(cfg, len(devices))
-    num_envs, num_steps = int(ppo.num_envs), int(ppo.num_steps)
-    num_minibatches, num_epochs = int(ppo.num_minibatches), int(ppo.num_epochs)
-    gamma, lam = float(ppo.gamma), float(ppo.gae_lambda)
-    adaptive = ppo.lr_schedule == "adaptive"
-    desired_kl, lr_min, lr_max = float(ppo.desired_kl), float(ppo.lr_min), float(ppo.lr_max)
-    normalize_advantage = bool(ppo.normalize_advantage)
-    loss_kwargs = dict(
-        clip_param=float(ppo.clip_param),
-        value_loss_coef=float(ppo.value_loss_coef),
-        entropy_coef=float(ppo.entropy_coef),
-        use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
-    )
-
-    # train.teacher set: distillation (foottof.ppo.distill), the imitation loss replaces PPO's
-    train_cfg = cfg.get("train", None)
-    distilling = bool(train_cfg is not None and train_cfg.get("teacher", ""))
+    settings = Settings.from_config(cfg)
+    num_envs = int(ppo.num_envs)
     networks = net.make_networks(env.action_size, cfg.network)
     optimizer = _make_optimizer(float(ppo.learning_rate), float(ppo.max_grad_norm))
     mesh = Mesh(np.array(devices), (AXIS,))
 
     env_shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((num_envs, 2), jp.uint32))
-    _check_env_state(env_shape, num_envs)
-    for name in ("truncation",):
-        if name not in env_shape.info:
-            raise ValueError(
-                f"env State.info lacks {name!r} (N,); wrap Brax envs with wrap_brax_env"
-            )
-    clash = {"train/", "loss/", "ppo/"}
-    for k in env_shape.metrics:
-        if any(k.startswith(c) for c in clash):
-            raise ValueError(
-                f"env metric {k!r} clashes with trainer metric prefixes {sorted(clash)}"
-            )
+    _check_env(env_shape, num_envs)
     obs_example = jax.tree.map(lambda s: jp.zeros((1,) + s.shape[1:], s.dtype), env_shape.obs)
 
     # Partition specs: params & co replicated, everything with an env axis sharded over AXIS.
@@ -192,222 +492,41 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         params=P(), opt_state=P(), normalizer=P(), env_state=P(AXIS), carry=P(AXIS),
         prev_done=P(AXIS), ep_return=P(AXIS), ep_length=P(AXIS), key=P(), iteration=P(),
     )  # fmt: skip
-
-    def _tree_spec(tree_spec, like):
-        # Broadcast each TrainState field's spec to all leaves of that field.
-        return jax.tree.map(
-            lambda s, sub: jax.tree.map(lambda _: s, sub),
-            tree_spec,
-            like,
-            is_leaf=lambda x: isinstance(x, P),
-        )
-
-    # ---------------------------------------------------------------- init
-    def _reset_envs(keys):
-        env_state = env.reset(keys)
-        n = keys.shape[0]
-        return (
-            env_state,
-            networks.init_carry(n),
-            jp.ones((n,), bool),
-            jp.zeros((n,), jp.float32),
-            jp.zeros((n,), jp.float32),
-        )
-
-    def _init(key):
-        key_params, key_env, key_next = jax.random.split(key, 3)
-        params = networks.init_params(key_params, obs_example)
-        opt_state = optimizer.init(params)
-        normalizer = networks.init_normalizer(obs_example)
-        keys = jax.random.split(key_env, num_envs)  # one reset key per env
-        reset = jax.shard_map(
-            _reset_envs, mesh=mesh, in_specs=P(AXIS), out_specs=P(AXIS), check_vma=False
-        )
-        env_state, carry, prev_done, ep_return, ep_length = reset(keys)
-        return TrainState(
-            params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
-            carry=carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
-            key=key_next, iteration=jp.zeros((), jp.int32),
-        )  # fmt: skip
-
-    state_shape = jax.eval_shape(_init, jax.ShapeDtypeStruct((2,), jp.uint32))
+    init_fn = functools.partial(init_state, env, networks, optimizer, mesh, num_envs, obs_example)
+    state_shape = jax.eval_shape(init_fn, jax.ShapeDtypeStruct((2,), jp.uint32))
     state_spec = _tree_spec(spec, state_shape)
     state_sharding = jax.tree.map(
         lambda s: NamedSharding(mesh, s), state_spec, is_leaf=lambda x: isinstance(x, P)
     )
-    init = jax.jit(_init, out_shardings=state_sharding)
-
-    # ----------------------------------------------------------- rollout
-    def _rollout(state: TrainState, key):
-        params, normalizer = state.params, state.normalizer
-        log_std = networks.action_log_std(params)
-
-        def step(carry, key_step):
-            env_state, net_carry, prev_done, ep_return, ep_length = carry
-            obs = env_state.obs
-            net_carry, mean, _, value = networks.step(params, normalizer, net_carry, obs, prev_done)
-            action = mean + jp.exp(log_std) * jax.random.normal(
-                key_step, mean.shape
-            )  # ~ N(mean, std)
-            log_prob = net.gaussian_log_prob(action, mean, log_std)
-            env_state = env.step(env_state, action)
-            done = env_state.done.astype(bool)
-            reward = env_state.reward.astype(jp.float32)
-            ep_return = ep_return + reward
-            ep_length = ep_length + 1.0
-            tr = Transition(
-                obs=obs, resets=prev_done, actions=action, log_probs=log_prob, means=mean,
-                values=value, rewards=reward, dones=done.astype(jp.float32),
-                truncation=env_state.info["truncation"].astype(jp.float32),
-                finished_return=jp.where(done, ep_return, 0.0),
-                finished_length=jp.where(done, ep_length, 0.0),
-                metrics={k: v.astype(jp.float32) for k, v in env_state.metrics.items()},
-            )  # fmt: skip
-            ep_return = jp.where(done, 0.0, ep_return)
-            ep_length = jp.where(done, 0.0, ep_length)
-            return (env_state, net_carry, done, ep_return, ep_length), tr
-
-        carry0 = (state.env_state, state.carry, state.prev_done, state.ep_return, state.ep_length)
-        carry, traj = jax.lax.scan(step, carry0, jax.random.split(key, num_steps))
-        env_state, net_carry, prev_done, _, _ = carry
-        _, _, _, last_value = networks.step(params, normalizer, net_carry, env_state.obs, prev_done)
-        return carry, traj, last_value
-
-    # ------------------------------------------------------------ update
-    def _sgd_step(carry, mb: losses.Minibatch):
-        params, opt_state, normalizer = carry
-        if distilling:  # static
-            grad_fn = jax.value_and_grad(distill.distill_loss, has_aux=True)
-            (_, metrics), grads = grad_fn(params, networks, normalizer, mb)
-        else:
-            grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
-            (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
-        grads = jax.lax.pmean(grads, AXIS)
-        metrics = jax.lax.pmean(metrics, AXIS)
-        if adaptive:
-            lr = adapt_learning_rate(
-                opt_state.hyperparams["learning_rate"],
-                metrics["ppo/kl"],
-                desired_kl,
-                lr_min,
-                lr_max,
-            )
-            opt_state = _set_learning_rate(opt_state, lr)
-        metrics["ppo/learning_rate_mean"] = opt_state.hyperparams["learning_rate"]  # this update's
-        updates, opt_state = optimizer.update(grads, opt_state, params)
-        params = optax.apply_updates(params, updates)
-        metrics["ppo/grad_norm"] = optax.global_norm(grads)
-        return (params, opt_state, normalizer), metrics
-
-    def _update_local(params, opt_state, normalizer, batch: Batch, key_update):
-        # key_update is replicated: each device folds in its index for its own shuffle stream.
-        key_update = jax.random.fold_in(key_update, jax.lax.axis_index(AXIS))
-        traj, carry_start, last_value = batch
-        rewards = losses.bootstrap_truncation(traj.rewards, traj.values, traj.truncation, gamma)
-        advantages, returns = losses.compute_gae(
-            rewards, traj.values, traj.dones, last_value, gamma, lam
-        )
-        if normalize_advantage:
-            mean = jax.lax.pmean(jp.mean(advantages), AXIS)
-            var = jax.lax.pmean(jp.mean((advantages - mean) ** 2), AXIS)
-            advantages = (advantages - mean) / (jp.sqrt(var) + 1e-8)
-
-        data = losses.Minibatch(
-            carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
-            log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(params),
-            values=traj.values, advantages=advantages, returns=returns,
-        )  # fmt: skip
-        n_local = traj.rewards.shape[1]
-        mb_size = n_local // num_minibatches
-
-        def _epoch(carry, key_epoch):
-            perm = jax.random.permutation(key_epoch, n_local)  # shuffle envs, keep time order
-            idx = perm.reshape(num_minibatches, mb_size)
-
-            def take(i):
-                return losses.Minibatch(
-                    carry=jax.tree.map(lambda x: x[i], data.carry),
-                    obs=jax.tree.map(lambda x: x[:, i], data.obs),
-                    resets=data.resets[:, i], actions=data.actions[:, i],
-                    log_probs=data.log_probs[:, i], means=data.means[:, i], log_std=data.log_std,
-                    values=data.values[:, i], advantages=data.advantages[:, i],
-                    returns=data.returns[:, i],
-                )  # fmt: skip
-
-            minibatches = jax.vmap(take)(idx)  # leading minibatch axis
-            minibatches = minibatches._replace(
-                log_std=jp.broadcast_to(data.log_std, (num_minibatches,) + data.log_std.shape)
-            )
-            return jax.lax.scan(_sgd_step, carry, minibatches)
-
-        (new_params, opt_state, _), sgd_metrics = jax.lax.scan(
-            _epoch,
-            (params, opt_state, normalizer),
-            jax.random.split(key_update, num_epochs),
-        )
-        if networks.normalize_observations:  # after the update: the loss used the rollout's stats
-            normalizer = running_statistics.update(
-                normalizer, net.select_obs(traj.obs), pmap_axis_name=AXIS
-            )
-        return new_params, opt_state, normalizer, sgd_metrics
-
-    def _iteration_local(state: TrainState):
-        key, key_rollout, key_update = jax.random.split(state.key, 3)
-        # Each device gets its own rollout stream; the state key stays replicated.
-        key_rollout = jax.random.fold_in(key_rollout, jax.lax.axis_index(AXIS))
-        carry_start = state.carry  # stored initial carry of this rollout (before any reset)
-        (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = _rollout(
-            state, key_rollout
-        )
-        params, opt_state, normalizer, sgd_metrics = _update_local(
-            state.params,
-            state.opt_state,
-            state.normalizer,
-            Batch(traj, carry_start, last_value),
-            key_update,
-        )
-        metrics = _iteration_metrics(
-            traj, sgd_metrics, networks.action_log_std(params), params, opt_state
-        )
-        new_state = TrainState(
-            params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
-            carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
-            key=key, iteration=state.iteration + 1,
-        )  # fmt: skip
-        return new_state, metrics
-
     iteration_sharded = jax.shard_map(
-        _iteration_local,
+        functools.partial(local_iteration, env, networks, optimizer, settings),
         mesh=mesh,
         in_specs=(state_spec,),
         out_specs=(state_spec, P()),
         check_vma=False,
     )
-    iteration = jax.jit(
-        iteration_sharded,
-        in_shardings=(state_sharding,),
-        out_shardings=(state_sharding, NamedSharding(mesh, P())),
-        donate_argnums=0,
-    )
     # The update alone (tests: the same batch on 1 device and split over several).
-    update = jax.jit(
-        jax.shard_map(
-            _update_local,
-            mesh=mesh,
-            in_specs=(P(), P(), P(), Batch(P(None, AXIS), P(AXIS), P(AXIS)), P()),
-            out_specs=P(),
-            check_vma=False,
-        )
+    update_sharded = jax.shard_map(
+        functools.partial(local_update, networks, optimizer, settings),
+        mesh=mesh,
+        in_specs=(P(), P(), P(), Batch(P(None, AXIS), P(AXIS), P(AXIS)), P()),
+        out_specs=P(),
+        check_vma=False,
     )
     return Train(
-        init=init,
-        iteration=iteration,
-        update=update,
+        init=jax.jit(init_fn, out_shardings=state_sharding),
+        iteration=jax.jit(
+            iteration_sharded,
+            in_shardings=(state_sharding,),
+            out_shardings=(state_sharding, NamedSharding(mesh, P())),
+            donate_argnums=0,
+        ),
+        update=jax.jit(update_sharded),
         networks=networks,
         mesh=mesh,
         state_sharding=state_sharding,
         num_envs=num_envs,
-        steps_per_iteration=num_envs * num_steps,
+        steps_per_iteration=num_envs * settings.num_steps,
     )
 
 
@@ -459,8 +578,16 @@ __all__ = [
     "TrainState",
     "Transition",
     "VmapEnv",
+    "Settings",
     "adapt_learning_rate",
     "env_steps",
+    "epoch_minibatches",
+    "init_state",
+    "local_iteration",
+    "local_update",
     "make_train",
+    "rollout",
+    "rollout_step",
+    "sgd_step",
     "wrap_brax_env",
 ]

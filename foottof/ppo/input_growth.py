@@ -1,0 +1,105 @@
+"""Input growth: a checkpoint whose network reads fewer inputs restores into one that reads more.
+
+When a run adds inputs at the end (critic inputs such as env.critic_height_scan; network.obs_skip's
+observation beside the LSTM output; on request the actor's, env.actor_terrain), init_from or a
+resume from a run without them restores the saved kernels with zero rows for the new inputs, zero
+Adam moments for them and normalizer entries of mean 0 / variance 1: the grown network acts as the
+saved one did. The names below match inside params, the optimizer's moments and the normalizer.
+"""
+
+from typing import Any
+
+import jax
+import numpy as np
+
+# Leaves whose first axis is a network's input (grown by init_from and a resume).
+INPUT_LEAVES = (
+    "['memory_c']['lstm_0']['ii']['kernel']",
+    "['memory_c']['lstm_0']['if']['kernel']",
+    "['memory_c']['lstm_0']['ig']['kernel']",
+    "['memory_c']['lstm_0']['io']['kernel']",
+    "['critic']['dense_0']['kernel']",  # the critic head's first layer (mlp policy, obs_skip)
+    "['actor']['dense_0']['kernel']",  # the actor head's first layer (mlp policy, obs_skip)
+    "['privileged_state']",  # normalizer mean / std / summed_variance
+)
+# The actor's inputs: grown only on request (init_from into env.actor_terrain, a teacher started
+# from a sensor-only policy); anywhere else an actor of another layout is an error.
+ACTOR_INPUT_LEAVES = (
+    "['memory_a']['lstm_0']['ii']['kernel']",
+    "['memory_a']['lstm_0']['if']['kernel']",
+    "['memory_a']['lstm_0']['ig']['kernel']",
+    "['memory_a']['lstm_0']['io']['kernel']",
+    "['state']",  # normalizer mean / std / summed_variance
+)
+GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, not 'rollout'
+
+
+def grown_leaves(saved_manifest: list, target: Any, actor: bool = False) -> dict[str, tuple]:
+    """{leaf name: saved shape} of input leaves (INPUT_LEAVES, and ACTOR_INPUT_LEAVES if
+    ``actor``) the checkpoint holds with fewer inputs (a shorter first axis, the rest equal) than
+    `target`.
+
+    Args:
+      saved_manifest: one item's manifest, [[leaf name, shape, dtype], ...].
+      target: that item's pytree in this model (arrays or abstract arrays)."""
+    leaves = INPUT_LEAVES + (ACTOR_INPUT_LEAVES if actor else ())
+    saved = {name: tuple(shape) for name, shape, _ in saved_manifest}
+    out = {}
+    for path, x in jax.tree_util.tree_flatten_with_path(target)[0]:
+        name = jax.tree_util.keystr(path)
+        old, new = saved.get(name), tuple(np.shape(x))
+        if (
+            old is not None
+            and any(k in name for k in leaves)
+            and len(old) == len(new) >= 1
+            and old[0] < new[0]
+            and old[1:] == new[1:]
+        ):
+            out[name] = old
+    return out
+
+
+def shaped_as_saved(target: Any, grown: dict[str, tuple]) -> Any:
+    """`target` with the leaves in `grown` ({name: saved shape}) as abstract arrays of the
+    saved shape (what the checkpoint holds)."""
+    return jax.tree_util.tree_map_with_path(
+        lambda p, x: (
+            jax.ShapeDtypeStruct(grown[jax.tree_util.keystr(p)], x.dtype)
+            if jax.tree_util.keystr(p) in grown
+            else x
+        ),
+        target,
+    )
+
+
+def grow_tree(tree: Any, target: Any, grown: dict[str, tuple]) -> Any:
+    """The restored `tree` with its `grown` leaves embedded in `target`'s shapes (grow_rows; a
+    normalizer's new entries get the variance-1 summed variance of its sample count)."""
+    count = 0.0
+    if "normalizer" in tree:
+        c = tree["normalizer"].count
+        count = float(np.asarray(getattr(c, "hi", 0))) * 2.0**32 + float(
+            np.asarray(getattr(c, "lo", c))
+        )
+    return jax.tree_util.tree_map_with_path(
+        lambda p, x, t: (
+            jax.numpy.asarray(grow_rows(jax.tree_util.keystr(p), x, np.shape(t), count))
+            if jax.tree_util.keystr(p) in grown
+            else x
+        ),
+        tree,
+        target,
+    )
+
+
+def grow_rows(name: str, value: Any, shape: tuple, count: float) -> np.ndarray:
+    """`value` embedded in `shape` along axis 0: new kernel rows 0 (new inputs start unused),
+    new normalizer entries mean 0, std 1 and summed variance `count` (variance 1)."""
+    value = np.asarray(value)
+    fill = 0.0
+    if ".std[" in name:
+        fill = 1.0
+    elif ".summed_variance[" in name:
+        fill = count
+    pad = np.full((shape[0] - value.shape[0], *value.shape[1:]), fill, value.dtype)
+    return np.concatenate([value, pad], axis=0)

@@ -158,7 +158,10 @@ def test_rays_are_drawn(episode):
     assert (np.abs(drawn - plain).sum(-1) > 30).mean() < 0.2  # rays, not a different scene
 
 
-def test_write_analysis_outputs(episode, tmp_path):
+def test_write_analysis_outputs(episode, tmp_path, monkeypatch):
+    # imageio-ffmpeg's reader starts ffmpeg with preexec_fn=os.setpgrp unless this is set: a
+    # preexec_fn makes Python fork the interpreter, which JAX warns about (os.fork ... deadlock)
+    monkeypatch.setenv("IMAGEIO_FFMPEG_NO_PREVENT_SIGINT", "1")
     _, env, trace = episode
     stride = 8
     paths = analysis.write_analysis(env, trace, str(tmp_path), "tof", "mp4", stride)

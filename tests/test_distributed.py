@@ -422,7 +422,7 @@ def test_killed_process_stops_the_run_and_a_resume_continues(tmp_path):  # ~1 mi
     must go. A half-written checkpoint (what a kill during a save leaves, planted newer than
     all) is never read: 2 new processes with --resume continue from iteration 4, and
     metrics.csv continues without a gap or a repeated iteration."""
-    from foottof.ppo import checkpoint as ckpt
+    from foottof.ppo import integrity
     from foottof.ppo import run_dir as run_dirs
 
     run = tmp_path / "run"
@@ -430,7 +430,7 @@ def test_killed_process_stops_the_run_and_a_resume_continues(tmp_path):  # ~1 mi
     cmd = [sys.executable, WORKER, "run", str(run), "1000", "4"]  # 1000 iterations: stopped early
     procs = _start(cmd, 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="10")
     try:
-        complete = checkpoints / "4" / ckpt.INTEGRITY_FILE
+        complete = checkpoints / "4" / integrity.INTEGRITY_FILE
         _wait_until(lambda: complete.exists() and _logged(run, 5), procs, 600, "iteration 5")
         procs[1].send_signal(signal.SIGKILL)
         killed = time.time()
@@ -449,7 +449,7 @@ def test_killed_process_stops_the_run_and_a_resume_continues(tmp_path):  # ~1 mi
     assert resumed == 4 and 5 <= after <= 7, (resumed, after)
     assert run_dirs.latest_checkpoint(str(run)) == 4
     assert sorted(s for s in os.listdir(checkpoints) if s.isdigit()) == ["4"]
-    assert ckpt.integrity_problem(str(checkpoints / "4")) is None
+    assert integrity.integrity_problem(str(checkpoints / "4")) is None
     before = _metrics(run)
     assert [int(row["iteration"]) for row in before] == list(range(1, after + 1))
 
@@ -474,7 +474,7 @@ def test_killed_process_stops_the_run_and_a_resume_continues(tmp_path):  # ~1 mi
     rows = _metrics(run)
     assert [int(row["iteration"]) for row in rows] == list(range(1, end + 1))
     assert rows[:resumed] == before[:resumed]  # the rows up to the checkpoint are kept
-    assert ckpt.integrity_problem(str(checkpoints / str(end))) is None  # written anew
+    assert integrity.integrity_problem(str(checkpoints / str(end))) is None  # written anew
     assert not half.exists()  # orbax replaced the half-written folder
 
 

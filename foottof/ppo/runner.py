@@ -303,24 +303,10 @@ def gpu_sized_warning(cfg, backend: str) -> str | None:
     )
 
 
-def _run(
-    cfg, env, run_dir, resume, init_from, on_iteration, main, init_params=None
-) -> train_lib.TrainState:
-    """run() after the run-dir checks; see there."""
-    t = cfg.train
-    if main:
-        _write_config(cfg, run_dir)
-
-    warning = gpu_sized_warning(cfg, jax.default_backend())
-    if warning:
-        print(warning)
-
-    trainer, iteration, cached = _trainer(env, cfg)
-    key = jax.random.PRNGKey(int(cfg.get("seed", 0)))
-    t_init = time.time()
-    state = trainer.init(key)  # compiles env reset + network init, then dispatches it
-    init_s = time.time() - t_init
-    checkpointer = ckpt.Checkpointer(run_dir, int(t.max_checkpoints), bool(t.checkpoint_env_state))
+def _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_params):
+    """The state a run starts from: restored (resume), its params and normalizer read from
+    ``init_from`` or made by ``init_params``, else ``state`` as initialized. Closes the
+    checkpointer when reading fails (an open manager leaves orbax's event loop to fail at exit)."""
     if resume:
         try:
             state, restored_rollout = checkpointer.restore(state)
@@ -355,6 +341,40 @@ def _run(
             params, normalizer = jax.device_put(initial, shardings)
             state = state.replace(params=params, normalizer=normalizer)
             print("[runner] params and normalizer initialized by init_params")
+    return state
+
+
+def _check_finite(metrics: dict, it: int, last_saved, directory) -> None:
+    """Raises NonFiniteError naming the watched metrics (and params) that are not finite."""
+    bad = [k for k in _WATCHED if not math.isfinite(metrics[k])]
+    if metrics["ppo/params_finite"] < 1.0:
+        bad.append("params")
+    if bad:
+        raise NonFiniteError(
+            f"non-finite {', '.join(bad)} at iteration {it}; training stopped. Last good "
+            f"checkpoint: iteration {last_saved} in {directory}"
+        )
+
+
+def _run(
+    cfg, env, run_dir, resume, init_from, on_iteration, main, init_params=None
+) -> train_lib.TrainState:
+    """run() after the run-dir checks; see there."""
+    t = cfg.train
+    if main:
+        _write_config(cfg, run_dir)
+
+    warning = gpu_sized_warning(cfg, jax.default_backend())
+    if warning:
+        print(warning)
+
+    trainer, iteration, cached = _trainer(env, cfg)
+    key = jax.random.PRNGKey(int(cfg.get("seed", 0)))
+    t_init = time.time()
+    state = trainer.init(key)  # compiles env reset + network init, then dispatches it
+    init_s = time.time() - t_init
+    checkpointer = ckpt.Checkpointer(run_dir, int(t.max_checkpoints), bool(t.checkpoint_env_state))
+    state = _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_params)
     wall_before_s = trim_metrics(run_dir, int(state.iteration)) if (resume and main) else 0.0
 
     t0 = time.time()  # wall clock of this chunk starts before the compile
@@ -382,14 +402,7 @@ def _run(
             metrics = {k: float(v) for k, v in jax.device_get(metrics).items()}
             it += 1
             dt = time.time() - t_it
-            bad = [k for k in _WATCHED if not math.isfinite(metrics[k])]
-            if metrics["ppo/params_finite"] < 1.0:
-                bad.append("params")
-            if bad:
-                raise NonFiniteError(
-                    f"non-finite {', '.join(bad)} at iteration {it}; training stopped. Last good "
-                    f"checkpoint: iteration {last_saved} in {checkpointer.directory}"
-                )
+            _check_finite(metrics, it, last_saved, checkpointer.directory)
             sps = trainer.steps_per_iteration / dt
             avg = (time.time() - run_start) / (it - run_start_it)
             row = {

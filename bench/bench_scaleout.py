@@ -15,7 +15,6 @@ import argparse
 import csv
 import os
 import shutil
-import socket
 import statistics
 import subprocess
 import sys
@@ -28,27 +27,9 @@ sys.path.insert(0, ROOT)
 from foottof.ppo import distributed  # noqa: E402
 
 
-def _env(devices: int, **extra: str) -> dict:
-    env = {
-        k: v
-        for k, v in os.environ.items()
-        if k not in distributed.JAX_VARS and not k.startswith("SLURM_")
-    }
-    env["JAX_PLATFORMS"] = "cpu"
-    env["XLA_FLAGS"] = f"--xla_force_host_platform_device_count={devices}"
-    env.update(extra)
-    return env
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
-
-
 def _run(name: str, cmd: list[str], processes: int, devices: int, run_dir: str) -> float:
     """Runs one setup to the end; its wall time [s]. Raises with the output of a failed process."""
-    address = f"localhost:{_free_port()}"
+    address = f"localhost:{distributed.free_local_port()}"
     procs = []
     t0 = time.perf_counter()
     for i in range(processes):
@@ -63,7 +44,7 @@ def _run(name: str, cmd: list[str], processes: int, devices: int, run_dir: str) 
             subprocess.Popen(
                 [*cmd, "--run_dir", run_dir],
                 cwd=ROOT,
-                env=_env(devices, **extra),
+                env=distributed.local_cpu_environ(devices, **extra),
                 stdout=subprocess.PIPE,
                 stderr=subprocess.STDOUT,
                 text=True,

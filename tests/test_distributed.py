@@ -12,7 +12,6 @@ import os
 import re
 import shutil
 import signal
-import socket
 import subprocess
 import sys
 import time
@@ -29,24 +28,8 @@ WORKER = os.path.join(TESTS, "multidevice_worker.py")
 U = 2.0**-24  # float32 unit roundoff
 
 
-def _env(devices: int = 1, **extra) -> dict:
-    """os.environ for a child on `devices` fake CPU devices, without distributed variables."""
-    env = {
-        k: v
-        for k, v in os.environ.items()
-        if k not in distributed.JAX_VARS and not k.startswith("SLURM_")
-    }
-    env["JAX_PLATFORMS"] = "cpu"
-    flags = env.get("XLA_FLAGS", "")
-    env["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={devices}".strip()
-    env.update(extra)
-    return env
-
-
-def _free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("localhost", 0))
-        return s.getsockname()[1]
+_env = distributed.local_cpu_environ
+_free_port = distributed.free_local_port
 
 
 def _start(cmd: list[str], n: int, **extra) -> list[subprocess.Popen]:

@@ -18,6 +18,7 @@ README_multihost.md, "When a process dies".
 """
 
 import os
+import socket
 import sys
 from collections.abc import Mapping
 from typing import NamedTuple, NoReturn
@@ -252,3 +253,21 @@ def exit_at_once(message: str, status: int = EXIT_PROCESS_LOST) -> NoReturn:
     sys.stderr.write(message + "\n")
     sys.stderr.flush()
     os._exit(status)
+
+
+def local_cpu_environ(devices: int = 1, **extra: str) -> dict:
+    """os.environ for a child process on ``devices`` fake CPU devices, without the distributed
+    variables (``extra`` adds some back: the localhost runs of the tests and bench/)."""
+    env = {k: v for k, v in os.environ.items() if k not in JAX_VARS and not k.startswith("SLURM_")}
+    env["JAX_PLATFORMS"] = "cpu"
+    flags = env.get("XLA_FLAGS", "")
+    env["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={devices}".strip()
+    env.update(extra)
+    return env
+
+
+def free_local_port() -> int:
+    """A TCP port free on localhost now (for a coordinator address of a local run)."""
+    with socket.socket() as s:
+        s.bind(("localhost", 0))
+        return s.getsockname()[1]

@@ -19,6 +19,7 @@ def get_section() -> ml_collections.ConfigDict:
     r.edge_radius_m = 0.04  # foot_edge: terrain sampled this far from the foot centre [m]
     r.edge_height_m = 0.05  # foot_edge: height spread of those samples that makes an edge [m]
     r.clearance_target_m = 0.12  # foot_clearance: swing height asked of moving feet [m]
+    r.overspeed_mps = 0.6  # overspeed: horizontal base speed above this is penalized [m/s]
     r.overall_scale = 1.0  # multiplies every scaled term: value targets' size, not the pricing
     r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
     s = ml_collections.ConfigDict()
@@ -45,6 +46,7 @@ def get_section() -> ml_collections.ConfigDict:
     s.foot_edge = 0.0  # number of feet touching the terrain at a height step (0 = off) [per s]
     s.foot_clearance = 0.0  # moving feet below clearance_target_m: sum tanh(2|v|) shortfall^2
     # (0 = off, and not computed) [m^2 per s]
+    s.overspeed = 0.0  # horizontal base speed above overspeed_mps (0 = off) [(m/s) per s]
     r.scales = s
     return r
 

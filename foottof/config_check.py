@@ -265,6 +265,7 @@ RULES = {
     "reward.task_window_s": _pos,
     "reward.stall_toward_goal": _bool,
     "reward.overall_scale": _pos,
+    "reward.overspeed_mps": _nonneg,
     "reward.scales.*": _num(),
     # ppo, network, train
     "ppo.num_envs": _int(1),

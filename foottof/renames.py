@@ -44,6 +44,8 @@ ADDED_FIELDS = {
     "env.physics": "auto",  # MuJoCo C on a CPU JAX backend, else MJX
     "env.physics_threads": 0,  # os.cpu_count() MuJoCo C threads
     "network.max_noise_std": 0.0,  # no cap on the action std
+    "reward.scales.overspeed": 0.0,  # off: base speed is not penalized
+    "reward.overspeed_mps": 0.6,  # read only when the overspeed term is on
 }
 # Added fields that were already in the configs of the evaluations kept (results/): draw
 # fingerprints hash them at every value, as those evaluations did; ADDED_FIELDS gives only the

@@ -61,6 +61,7 @@ BAD = [
     ("noise.model_path", "nope.json", "existing file"),
     ("noise.stage2.min_delay_steps", 9, "<= noise.stage2.max_delay_steps=4"),
     ("reward.scales.reach", math.nan, "finite"),
+    ("reward.overspeed_mps", -0.1, ">= 0"),
     ("eval.odometry_levels", (0.0, 11.0), "[0, 10]"),
     ("eval.sources", ("tof", "lidar"), "'mock_ideal'"),
     ("seed", -3, ">= 0"),

@@ -404,6 +404,32 @@ def test_arrive_task_terms_hand_checked():
     assert _cfg().reward.scales.task == 0.0
 
 
+def test_overspeed_term_hand_checked():
+    """overspeed: horizontal base speed above reward.overspeed_mps, linear, off by default."""
+    r = _cfg().reward
+    assert r.scales.overspeed == 0.0 and r.overspeed_mps == 0.6
+
+    def term(v, limit=0.6):
+        r.overspeed_mps = limit
+        x = _inputs(base_lin_vel=jp.asarray(v, jp.float32))
+        return float(rw.compute_terms(x, _spec(r), 0.02)["overspeed"])
+
+    assert term([0.3, 0.4, 0.0]) == 0.0  # 0.5 m/s is below 0.6
+    assert term([0.6, 0.8, 0.0]) == pytest.approx(0.4)  # 1.0 m/s: 0.4 above
+    assert term([0.6, 0.8, 3.0]) == pytest.approx(0.4)  # vertical speed does not count
+    assert term([-0.9, -1.2, 0.0]) == pytest.approx(0.9)  # any direction: 1.5 m/s
+    assert term([0.6, 0.8, 0.0], limit=0.0) == pytest.approx(1.0)
+    # Scaled as a rate: -2 per (m/s) per s over a 0.02 s step at 1.0 m/s -> -2 * 0.4 * 0.02.
+    r.overspeed_mps = 0.6
+    r.scales.overspeed = -2.0
+    x = _inputs(base_lin_vel=jp.array([0.6, 0.8, 0.0]))
+    scaled = rw.scaled_terms(rw.compute_terms(x, _spec(r), 0.02), r.scales, 0.02)
+    assert float(scaled["overspeed"]) == pytest.approx(-0.016)
+    # A config saved before the term existed reads it as off.
+    del r.scales["overspeed"]
+    assert rw.RewardSpec.from_config(r).scale("overspeed") == 0.0
+
+
 def test_guidance_weight_counts_training_steps_across_resets(env):
     """The env's step counter (info['env_steps']) survives auto-resets and sets the bias weight:
     decay over iterations 0-2 at 2 steps per iteration, 3-step episodes."""

@@ -26,6 +26,7 @@ DENSE_TERMS = (
     "collision",
     "foot_edge",
     "foot_clearance",
+    "overspeed",
 )
 SPARSE_TERMS = ("reach", "termination")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
@@ -50,6 +51,7 @@ class RewardSpec:
     edge_radius_m: float
     edge_height_m: float
     clearance_target_m: float
+    overspeed_mps: float  # the overspeed term counts base speed above this [m/s]
     overall_scale: float  # multiplies every scaled term
     only_positive: bool
     scales: tuple[tuple[str, float], ...]  # (term, scale) in REWARD_TERMS order
@@ -81,6 +83,7 @@ class RewardSpec:
             edge_radius_m=float(rcfg.edge_radius_m),
             edge_height_m=float(rcfg.edge_height_m),
             clearance_target_m=float(read_added(rcfg, "reward.clearance_target_m")),
+            overspeed_mps=float(read_added(rcfg, "reward.overspeed_mps")),
             overall_scale=float(read_added(rcfg, "reward.overall_scale")),
             only_positive=bool(rcfg.only_positive),
             scales=tuple((name, scale_of(rcfg.scales, name)) for name in REWARD_TERMS),
@@ -273,6 +276,9 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
             jp.tanh(2.0 * jp.sqrt(foot_speed_sq))
             * jp.square(jp.maximum(target - x.foot_clearance, 0.0))
         ),
+        # The paper's "overly aggressive gaits" regularizer: horizontal base speed above
+        # overspeed_mps, linear in the excess (arriving early earns nothing on the arrive task).
+        "overspeed": jp.maximum(jp.linalg.norm(x.base_lin_vel[:2]) - spec.overspeed_mps, 0.0),
     }
 
 

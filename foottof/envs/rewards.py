@@ -249,7 +249,8 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
     task = in_window / (window * (1.0 + jp.square(dist)))
     # Stall: slow (or, with stall_toward_goal, slow toward the goal: walking about does not
     # count as moving) and outside the success radius, after the grace period.
-    speed = v_toward if spec.stall_toward_goal else jp.linalg.norm(x.base_lin_vel[:2])  # static
+    horizontal_speed = jp.linalg.norm(x.base_lin_vel[:2])
+    speed = v_toward if spec.stall_toward_goal else horizontal_speed  # static
     stalling = (speed < spec.stall_speed_mps) & (at_goal == 0) & (x.time_s > spec.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
     target = spec.clearance_target_m
@@ -278,7 +279,7 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
         ),
         # The paper's "overly aggressive gaits" regularizer: horizontal base speed above
         # overspeed_mps, linear in the excess (arriving early earns nothing on the arrive task).
-        "overspeed": jp.maximum(jp.linalg.norm(x.base_lin_vel[:2]) - spec.overspeed_mps, 0.0),
+        "overspeed": jp.maximum(horizontal_speed - spec.overspeed_mps, 0.0),
     }
 
 

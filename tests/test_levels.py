@@ -171,6 +171,56 @@ def test_sightings_on_hand_made_rays():
     assert many[0].shape == (5, 1) and many[1].all()  # leading axes (steps) are kept
 
 
+def test_scan_sightings_on_hand_made_points():
+    """foottof.eval.failures.scan_sightings: a teacher's sample points near and far from a spot
+    on stone tops at z = 0, heights set by hand (a gap when more than 5 cm below the tops)."""
+    import numpy as np
+
+    from foottof.eval.failures import scan_sightings
+
+    def see(points, heights, spot=(0.0, 0.0)):
+        looked, gap = scan_sightings(spot, 0.0, np.array(points), np.array(heights))
+        return bool(looked[0]), bool(gap[0])
+
+    assert see([[0.05, 0.0], [0.3, 0.0]], [0.0, -0.5]) == (True, False)  # near one is stone
+    assert see([[0.05, 0.0], [0.3, 0.0]], [-0.5, 0.0]) == (True, True)  # near one in the gap
+    assert see([[0.05, 0.0]], [-0.04]) == (True, False)  # 4 cm below: still stone
+    assert see([[0.0, 0.09]], [-0.5]) == (False, False)  # 9 cm away: beyond the 8 cm radius
+    assert see([[0.06, 0.05]], [-0.5]) == (True, True)  # 7.8 cm away (hand-computed)
+    steps = scan_sightings((0.0, 0.0), 0.0, np.zeros((5, 3, 2)), np.full((5, 3), -1.0))
+    assert steps[0].shape == (5, 1) and steps[1].all()  # leading axes (steps) are kept
+
+
+def test_world_scan_points_are_where_the_teacher_reads():
+    """observations.world_scan_points and foot_patch_points: the heights there, taken from a
+    made-up terrain function, equal the critic scan and foot patches the env computes (turned by
+    a 30 degree yaw: the first scan point x -0.6, y -0.4 lands at the hand-computed place)."""
+    import jax.numpy as jp
+    import numpy as np
+
+    from foottof.envs import observations as obs_lib
+
+    def height_at(p):
+        return jp.sin(3.0 * p[..., 0]) + 0.5 * p[..., 1] ** 2
+
+    yaw = np.deg2rad(30.0)
+    quat = jp.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
+    base = jp.array([1.0, 2.0, 0.5])
+    pts = np.asarray(obs_lib.world_scan_points(base, quat))
+    c, s = np.cos(yaw), np.sin(yaw)
+    np.testing.assert_allclose(
+        pts[0], [1.0 - 0.6 * c + 0.4 * s, 2.0 - 0.6 * s - 0.4 * c], atol=1e-6
+    )
+    scan = obs_lib.critic_height_scan(height_at, base, quat)
+    np.testing.assert_allclose(scan, np.clip(height_at(pts) - 0.5, -1, 1), atol=1e-6)
+    feet = jp.array([[0.3, 0.2, 0.1], [0.3, -0.2, 0.0], [-0.3, 0.2, 0.05], [-0.3, -0.2, 0.0]])
+    fp = obs_lib.foot_patch_points(feet)
+    assert fp.shape == (4, 9, 2)
+    np.testing.assert_allclose(fp[2, 0], [-0.4, 0.1], atol=1e-6)  # offset (-0.1, -0.1)
+    patches = obs_lib.foot_patches(height_at, feet).reshape(4, 9)
+    np.testing.assert_allclose(patches, height_at(fp) - feet[:, None, 2], atol=1e-6)
+
+
 def test_sighting_summary_counts_steps_before_the_drop():
     import numpy as np
 

@@ -72,8 +72,7 @@ def actor_observation(
 def foot_patches(height_at, foot_pos: jax.Array) -> jax.Array:
     """(4 x 9,) true terrain heights at FOOT_PATCH_OFFSETS_M around each foot centre, relative
     to the foot centre, clipped to +-1 m [m] (the critic's; a teacher's actor's too)."""
-    offs = jp.array(FOOT_PATCH_OFFSETS_M, jp.float32)
-    pts = foot_pos[:, None, :2] + offs[None]  # (4, 9, 2)
+    pts = foot_patch_points(foot_pos)  # (4, 9, 2)
     heights = height_at(pts) - foot_pos[:, None, 2]  # rel. to foot centre
     return jp.clip(heights.reshape(-1), -1.0, 1.0)
 
@@ -81,11 +80,21 @@ def foot_patches(height_at, foot_pos: jax.Array) -> jax.Array:
 def critic_height_scan(height_at, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
     """(P,) terrain heights relative to the base at :func:`critic_scan_points`, turned with the
     base's heading (yaw only), clipped to +-1 m [m]."""
+    pts = world_scan_points(base_pos, base_quat)
+    return jp.clip(height_at(pts) - base_pos[2], -1.0, 1.0)
+
+
+def foot_patch_points(foot_pos: jax.Array) -> jax.Array:
+    """(4, 9, 2) world x, y where :func:`foot_patches` samples the terrain around each foot."""
+    return foot_pos[:, None, :2] + jp.array(FOOT_PATCH_OFFSETS_M, jp.float32)[None]
+
+
+def world_scan_points(base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
+    """(P, 2) world x, y of :func:`critic_scan_points`, turned with the base's heading (yaw)."""
     fwd = kinematics.quat_to_mat(base_quat)[:2, 0]  # base x axis, horizontal part
     fwd = fwd / jp.maximum(jp.linalg.norm(fwd), 1e-6)
     rot = jp.array([[fwd[0], -fwd[1]], [fwd[1], fwd[0]]])  # yaw rotation
-    pts = base_pos[None, 0:2] + critic_scan_points() @ rot.T
-    return jp.clip(height_at(pts) - base_pos[2], -1.0, 1.0)
+    return base_pos[None, 0:2] + critic_scan_points() @ rot.T
 
 
 def critic_scan_points() -> jax.Array:

@@ -112,6 +112,25 @@ def sightings(spot_xy, top_z, origins, dirs, t_hit, max_range_m: float):
     return looked.any(axis=-1), gap.any(axis=-1)
 
 
+def scan_sightings(spot_xy, top_z, points_xy, heights):
+    """Which of a teacher's terrain inputs (env.actor_terrain: foot patches and base scan) looked
+    at a spot and saw a gap there: a sample point looked when it lay within SIGHT_RADIUS_M of
+    ``spot_xy``, and saw a gap when the true height there lay more than SIGHT_BEYOND_M below the
+    stone tops ``top_z`` (the rays' rule of :func:`sightings`, for vertical probes).
+
+    Args:
+      spot_xy: (2,) the spot [m]; top_z: the stone-top height around it [m].
+      points_xy: (..., P, 2) sample points [m]; heights: (..., P) terrain heights there [m].
+
+    Returns:
+      (looked, gap): (..., 1) bool, shaped as one sensor for :func:`sighting_summary`.
+    """
+    p = np.asarray(points_xy, np.float64)
+    near = np.linalg.norm(p - np.asarray(spot_xy, np.float64), axis=-1) < SIGHT_RADIUS_M
+    low = np.asarray(heights, np.float64) < top_z - SIGHT_BEYOND_M
+    return near.any(axis=-1)[..., None], (near & low).any(axis=-1)[..., None]
+
+
 def sighting_summary(foot_z, top_z, end_step, looked, gap) -> tuple[int, int, int, bool]:
     """For one foot_stuck episode: (step the foot dropped: the last one before the end with its
     centre at or above ``top_z``, steps before it that some sensor first saw a gap at the spot
@@ -190,11 +209,14 @@ def run(
     foot that went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
     direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck) and, with
     ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
-    swing) row per foot_stuck episode (:func:`sighting_summary`; the own-sensor lead from the
-    stuck foot's sensor alone), else None."""
+    swing, teacher-input look lead, teacher-input gap lead) row per foot_stuck episode
+    (:func:`sighting_summary`; the own-sensor lead from the stuck foot's sensor alone; the
+    teacher-input leads from the env.actor_terrain sample points, :func:`scan_sightings`, whether
+    or not the policy reads them), else None."""
     import jax
     import jax.numpy as jp
 
+    from foottof.envs import observations as obs_lib
     from foottof.envs.stuck_probe import foot_gap_depth
     from foottof.eval.harness import make_eval_env_and_policy
     from foottof.robot.kinematics import world_foot_kinematics
@@ -224,6 +246,14 @@ def run(
                 env.sensing.spec, env.hfield, fk.tof_pos[sites], fk.tof_rot[sites]
             )
             out += (pos, dirs, t_hit)
+            # the teacher's terrain inputs (env.actor_terrain): foot patches, then the base scan
+            pts = jp.concatenate(
+                [
+                    obs_lib.foot_patch_points(fk.foot_pos).reshape(-1, 2),
+                    obs_lib.world_scan_points(qpos[0:3], qpos[3:7])[: obs_lib.ACTOR_SCAN_POINTS],
+                ]
+            )
+            out += (pts, env.hfield.height_at(pts))
         return out
 
     @jax.jit
@@ -256,7 +286,7 @@ def run(
     gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
     rows = None
     if sight:
-        origins, dirs, t_hit = rays
+        origins, dirs, t_hit, scan_xy, scan_h = rays
         rows = []
         for i in np.nonzero(is_stuck)[0]:
             f = foot[i]
@@ -269,7 +299,11 @@ def run(
             )
             own = np.nonzero(sites == f)[0]  # the stuck foot's own sensor (if it has one)
             own_lead = sighting_summary(foot_pos[:, i, f, 2], top, t[i], looked, seen[:, own])[1]
-            rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung))
+            s_looked, s_gap = scan_sightings(xy[i], top, scan_xy[:, i], scan_h[:, i])
+            scan_gap, scan_look = sighting_summary(
+                foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap
+            )[1:3]
+            rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung, scan_look, scan_gap))
     return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rows
 
 
@@ -278,7 +312,8 @@ def format_sightings(rows, gap) -> str:
     foot went in looked at, and seen as a gap, by any sensor and by the foot's own, in the
     second before it dropped, with the median lead of the first gap sighting [steps of 20 ms],
     and how many feet stepped in from a swing (and of them, into a gap seen before) or slid off
-    an edge they stood on."""
+    an edge they stood on; then how many spots a teacher's terrain inputs (env.actor_terrain: foot
+    patches and the 0.6 m base scan, 10 cm grids) had sampled, and seen as a gap, in that second."""
     lines = []
     for d, name in [(None, "all")] + list(enumerate(GAP_DIRECTIONS)):
         sel = [r for r in rows if d is None or gap[r[0]] == d]
@@ -292,7 +327,13 @@ def format_sightings(rows, gap) -> str:
             f"{sum(r[3] >= 0 for r in sel)}, seen as a gap {int(seen.sum())}{med}, "
             f"by the foot's own sensor {sum(r[4] >= 0 for r in sel)}; stepped in from a swing "
             f"{sum(r[5] for r in sel)} (seen before {sum(r[5] and r[2] >= 0 for r in sel)}), "
-            f"slid off an edge {sum(not r[5] for r in sel)}"
+            f"slid off an edge {sum(not r[5] for r in sel)}; a teacher's terrain inputs "
+            f"looked at it {sum(r[6] >= 0 for r in sel)}, saw a gap {sum(r[7] >= 0 for r in sel)}"
+            + (
+                f" (median lead {np.median([r[7] for r in sel if r[7] >= 0]):.0f} steps)"
+                if any(r[7] >= 0 for r in sel)
+                else ""
+            )
         )
     return "\n".join(lines)
 

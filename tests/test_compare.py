@@ -63,3 +63,31 @@ def test_bad_input_names_the_problem(tmp_path):
     assert compare.parse_branch("cap=runs/x") == ("cap", "runs/x")
     with pytest.raises(ValueError, match=r"expected NAME=DIR"):
         compare.parse_branch("=runs/x")
+
+
+def test_overlay_shifts_a_later_stage_and_reads_values_at_equal_env_steps(tmp_path, capsys):
+    """foottof.lab.overlay: a student run shifted by its teacher's env steps (+1k) and an
+    end-to-end run, hand-computed 2-iteration moving averages at 1.04k total env steps."""
+    from foottof.lab import overlay
+
+    _write_metrics(tmp_path / "e2e", [(i, 10 * i, float(i), 0.1 * i) for i in range(1, 121)])
+    _write_metrics(tmp_path / "student", [(1, 20, 5.0, 0.5), (2, 40, 7.0, None), (3, 60, 9.0, 1.0)])
+    overlay.main(
+        [f"e2e={tmp_path / 'e2e'}", f"student={tmp_path / 'student'}+1k", "--window", "2",
+         "--at", "1.04k", "--out", str(tmp_path / "out" / "pipeline")]
+    )  # fmt: skip
+    out = capsys.readouterr().out
+    # e2e at 1040 steps: iteration 104, levels 103, 104 -> 103.5; successes 10.3, 10.4 -> 10.35.
+    assert "| e2e | 0.0M | 103.500 | 10.350 |" in out
+    # student at 1040 = 1000 + 40: iteration 2, levels 5, 7 -> 6; success 0.5 (2 is empty).
+    assert "| student | 0.0M | 6.000 | 0.500 |" in out
+    with open(tmp_path / "out" / "pipeline.csv") as f:
+        rows = [r for r in csv.DictReader(f) if r["branch"] == "student"]
+    assert [r["env_steps"] for r in rows] == ["1020", "1040", "1060"]
+    assert (tmp_path / "out" / "pipeline.png").stat().st_size > 1000
+    assert overlay.parse_branch("s=runs/a+b+33.2M") == ("s", "runs/a+b", 33_200_000)
+    assert overlay.parse_branch("runs/x") == ("x", "runs/x", 0)
+    with pytest.raises(ValueError, match=r"'-3M'.*number >= 0"):
+        overlay.parse_steps("-3M")
+    with pytest.raises(SystemExit, match="error: .*'12q'"):
+        overlay.main([f"s={tmp_path / 'student'}+12q", "--out", str(tmp_path / "o")])

@@ -139,8 +139,12 @@ def test_draws_fingerprint_follows_what_decides_the_episodes():
     same, differ = tiny_cfg(), tiny_cfg()
     same.eval.out_dir, same.eval.episodes, same.ppo.learning_rate, same.seed = "x", 9, 0.5, 7
     same.eval.odometry_levels = (0.0, 1.0)
+    same.env.actor_terrain = True  # a teacher's actor inputs: the same episodes as its student's
     differ.eval.difficulty_fraction = 0.5
     assert results.draws_fingerprint(same) == base != results.draws_fingerprint(differ)
+    sensor = tiny_cfg()
+    sensor.env.critic_height_scan = not sensor.env.critic_height_scan  # hashed as before
+    assert results.draws_fingerprint(sensor) != base
 
 
 def test_paired_cli_bad_input_and_output(tmp_path, capsys):

@@ -53,6 +53,9 @@ _NOT_DRAW_EVAL_KEYS = (
     "shank_length_levels",
     "odometry_levels",
 )
+# Env fields that change what the actor reads and no draw: a teacher (env.actor_terrain) and its
+# ToF student run the same episodes, so their evaluations pair.
+_NOT_DRAW_ENV_KEYS = ("actor_terrain",)
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:
@@ -155,6 +158,9 @@ def draws_fingerprint(cfg) -> str:
     d["eval"] = dict(d["eval"])
     for k in _NOT_DRAW_EVAL_KEYS:
         d["eval"].pop(k, None)
+    d["env"] = dict(d["env"])
+    for k in _NOT_DRAW_ENV_KEYS:
+        d["env"].pop(k, None)
     text = json.dumps(d, sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()[:16]
 

@@ -65,11 +65,14 @@ def moving_average(x: np.ndarray, window: int) -> np.ndarray:
     return np.where(n > 0, s / np.maximum(n, 1), np.nan)
 
 
-def learning_curve(metrics: dict[str, np.ndarray], window: int = 20) -> dict[str, np.ndarray]:
-    """``env_steps`` and the moving average of each of CURVES (NaN where a column is missing)."""
+def learning_curve(
+    metrics: dict[str, np.ndarray], window: int = 20, curves=CURVES
+) -> dict[str, np.ndarray]:
+    """``env_steps`` and the moving average of each of ``curves`` ((column, label) pairs;
+    NaN where a column is missing)."""
     steps = metrics["env_steps"]
     out = {"env_steps": steps}
-    for key, _ in CURVES:
+    for key, _ in curves:
         col = metrics.get(key, np.full_like(steps, np.nan))
         out[key] = moving_average(col, window)
     return out

@@ -20,7 +20,8 @@ import os
 
 import numpy as np
 
-from foottof.lab.curves import _atomic_write, moving_average, read_metrics
+from foottof.eval import paired
+from foottof.lab.curves import _atomic_write, learning_curve, read_metrics
 
 # (metrics.csv column, panel title); a distillation run logs the same episode columns as PPO.
 COLUMNS = (
@@ -51,25 +52,20 @@ def parse_steps(text: str) -> int:
 
 
 def parse_branch(arg: str) -> tuple[str, str, int]:
-    """``NAME=RUN_DIR[+OFFSET]`` (or ``RUN_DIR[+OFFSET]``) -> (name, run_dir, offset env steps)."""
-    name, sep, rest = arg.partition("=")
-    if not sep:
-        name, rest = "", arg
+    """``NAME=RUN_DIR[+OFFSET]`` (or ``RUN_DIR[+OFFSET]``) -> (name, run_dir, offset env steps);
+    the NAME=RUN_DIR part as the A/B tools read it (foottof.eval.paired.parse_branch)."""
     offset = 0
-    head, plus, tail = rest.rpartition("+")
+    head, plus, tail = arg.rpartition("+")
     if plus and head:
-        offset, rest = parse_steps(tail), head
-    return (name or os.path.basename(os.path.normpath(rest))), rest, offset
+        offset, arg = parse_steps(tail), head
+    return (*paired.parse_branch(arg), offset)
 
 
 def branch_curve(run_dir: str, offset: int, window: int) -> dict[str, np.ndarray]:
     """``env_steps`` (shifted by ``offset``) and the moving average of each of COLUMNS (NaN
     where a column is missing)."""
-    m = read_metrics(os.path.join(run_dir, "metrics.csv"))
-    steps = m["env_steps"] + float(offset)
-    out = {"env_steps": steps}
-    for key, _ in COLUMNS:
-        out[key] = moving_average(m.get(key, np.full_like(steps, np.nan)), window)
+    out = learning_curve(read_metrics(os.path.join(run_dir, "metrics.csv")), window, COLUMNS)
+    out["env_steps"] = out["env_steps"] + float(offset)
     return out
 
 

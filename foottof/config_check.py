@@ -306,6 +306,7 @@ RULES = {
     "train.log_every": _int(1),
     "train.init_from": _path,
     "train.teacher": _path,
+    "train.student_privileged_inputs": _int(0, 153),  # observations.ACTOR_TERRAIN_INPUTS
     # eval
     "eval.episodes": _int(1),
     "eval.num_envs": _int(1),

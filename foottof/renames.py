@@ -37,6 +37,7 @@ ADDED_FIELDS = {
     "reward.stall_toward_goal": False,  # stall: slow in any direction (not toward the goal)
     "reward.overall_scale": 1.0,  # every reward term as scaled
     "train.teacher": "",  # PPO, no distillation
+    "train.student_privileged_inputs": 0,  # the student reads its sensors only
     "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)
     "env.critic_height_scan": False,  # off: the critic reads no base-centred height scan
     "env.foot_stuck_depth_m": 0.0,  # off: a foot in a gap does not end the episode

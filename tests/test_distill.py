@@ -165,3 +165,18 @@ def test_teacher_of_another_layout_is_one_clear_error(tmp_path):
         teacher.load_teacher(
             str(tmp_path / "t"), toy_envs.make_memory_env(EPISODE, teacher=True), tiny_cfg().network
         )
+
+
+def test_student_view_size_counts_the_privileged_inputs_it_is_given():
+    """The ToF student reads the teacher's inputs minus the 153 terrain inputs that
+    env.actor_terrain appends (hand count: 36 foot patches + 117 scan points), plus the first N of
+    them for the train.student_privileged_inputs diagnostic; N outside [0, 153] is one error."""
+    n = 181 + 36 + 117  # the teacher's actor inputs for 4 sensors x 16 zones
+    assert teacher.student_view_size(n) == 181
+    assert teacher.student_view_size(n, 36) == 181 + 36
+    assert teacher.student_view_size(n, 153) == n
+    for bad in (-1, 154):
+        with pytest.raises(
+            ValueError, match=rf"student_privileged_inputs={bad} must be in \[0, 153\]"
+        ):
+            teacher.student_view_size(n, bad)

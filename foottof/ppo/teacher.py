@@ -71,14 +71,35 @@ def check_teacher_path(path: str) -> None:
         )
 
 
+def student_view_size(teacher_obs_size: int, privileged_inputs: int = 0) -> int:
+    """How many of the teacher's actor inputs a ToF student reads: its own (the teacher's minus
+    the ACTOR_TERRAIN_INPUTS that env.actor_terrain appends) and the first ``privileged_inputs``
+    of those (train.student_privileged_inputs, a diagnostic: 36 = the true foot patches).
+
+    Raises:
+      ValueError: naming the value and its range, when ``privileged_inputs`` is outside
+        [0, ACTOR_TERRAIN_INPUTS].
+    """
+    from foottof.envs.observations import ACTOR_TERRAIN_INPUTS
+
+    if not 0 <= int(privileged_inputs) <= ACTOR_TERRAIN_INPUTS:
+        raise ValueError(
+            f"train.student_privileged_inputs={privileged_inputs} must be in "
+            f"[0, {ACTOR_TERRAIN_INPUTS}] (the teacher's terrain inputs: 36 foot patches, then "
+            f"the base scan)"
+        )
+    return int(teacher_obs_size) - ACTOR_TERRAIN_INPUTS + int(privileged_inputs)
+
+
 def make_distill_env(cfg):
     """(batched TeacherEnv, init function) for a distillation run of the ToF env: the env is
     built with env.actor_terrain on (the teacher's observation; ``cfg`` itself keeps the
     student's layout, so its saved run config evaluates the student), the teacher loaded from
     ``cfg.train.teacher``, and the init function cuts the student from the teacher
-    (:func:`student_from_teacher`; used where the run has no train.init_from)."""
+    (:func:`student_from_teacher`; used where the run has no train.init_from). With
+    ``train.student_privileged_inputs`` = N > 0 (a diagnostic) the student also reads the first N
+    terrain inputs (36: the foot patches); such a student evaluates only in this env."""
     from foottof.envs import make_training_env
-    from foottof.envs.observations import ACTOR_TERRAIN_INPUTS
 
     path = str(cfg.train.teacher)
     check_teacher_path(path)
@@ -93,7 +114,9 @@ def make_distill_env(cfg):
     env = make_training_env(full)
     teacher = load_teacher(path, env, teacher_network_cfg(path, cfg.network))
     shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
-    student_obs_size = shape.obs[net.ACTOR_KEY].shape[-1] - ACTOR_TERRAIN_INPUTS
+    student_obs_size = student_view_size(
+        shape.obs[net.ACTOR_KEY].shape[-1], read_added(cfg.train, "train.student_privileged_inputs")
+    )
     _, t_params, t_norm = teacher
 
     def init(params, normalizer):

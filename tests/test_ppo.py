@@ -623,3 +623,31 @@ def test_toy_env_contract():
     s = env.step(s, -cue[:, None])
     assert np.all(s.done == 1) and np.all(s.metrics["episode/success"] == 0)
     assert np.all(s.obs[:, 1] == 1)  # auto-reset: first-step flag of a new episode
+
+
+def test_resume_with_a_fixed_rate_learns_at_the_configs_rate(tmp_path):
+    """A branch resumed with another fixed ppo.learning_rate uses it (the checkpoint's optimizer
+    state holds the saved rate); an adaptive rate carries on from where it was saved."""
+    env = MEMORY_ENV
+
+    def cfg(n, **ppo):
+        c = tiny_cfg(num_iterations=n)
+        c.ppo.update(ppo)
+        return c
+
+    runner.run(cfg(2, lr_schedule="fixed", learning_rate=1e-3), env, str(tmp_path / "f"))
+    runner.run(
+        cfg(4, lr_schedule="fixed", learning_rate=3e-3), env, str(tmp_path / "f"), resume=True
+    )
+    rows = list(csv.DictReader((tmp_path / "f" / "metrics.csv").open()))
+    lrs = [float(r["ppo/learning_rate_mean"]) for r in rows]
+    np.testing.assert_allclose(lrs, [1e-3, 1e-3, 3e-3, 3e-3], rtol=1e-6)
+    runner.run(cfg(2, lr_schedule="adaptive", learning_rate=1e-3), env, str(tmp_path / "a"))
+    saved = float(
+        list(csv.DictReader((tmp_path / "a" / "metrics.csv").open()))[-1]["ppo/learning_rate"]
+    )
+    runner.run(
+        cfg(3, lr_schedule="adaptive", learning_rate=3e-3), env, str(tmp_path / "a"), resume=True
+    )
+    last = list(csv.DictReader((tmp_path / "a" / "metrics.csv").open()))[-1]
+    assert float(last["ppo/learning_rate_mean"]) == pytest.approx(saved, rel=1e-6)

@@ -8,6 +8,7 @@ import time
 from collections.abc import Callable
 
 import jax
+import jax.numpy as jp
 import ml_collections
 import numpy as np
 
@@ -317,6 +318,7 @@ def _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_p
             fresh = trainer.init(jax.random.fold_in(state.key, state.iteration))
             state = state.replace(**{f: getattr(fresh, f) for f in ckpt.ITEMS["rollout"]})
         print(f"[runner] resumed from iteration {int(state.iteration)} in {checkpointer.directory}")
+        state = _fixed_rate_from_config(cfg, state)
     elif init_from:
         try:
             params, normalizer = ckpt.load_params_and_normalizer(
@@ -342,6 +344,20 @@ def _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_p
             state = state.replace(params=params, normalizer=normalizer)
             print("[runner] params and normalizer initialized by init_params")
     return state
+
+
+def _fixed_rate_from_config(cfg, state: train_lib.TrainState) -> train_lib.TrainState:
+    """A resumed run with ``ppo.lr_schedule = "fixed"`` learns at its config's rate: the
+    checkpoint's optimizer state holds the rate it was saved with, which a resume that changes
+    ``ppo.learning_rate`` (a branch) would otherwise keep. An adaptive rate carries on as saved."""
+    if cfg.ppo.get("lr_schedule", "adaptive") != "fixed":
+        return state
+    saved = state.opt_state.hyperparams["learning_rate"]
+    lr = float(cfg.ppo.learning_rate)
+    if float(saved) != np.float32(lr):
+        print(f"[runner] fixed learning rate {float(saved):.3g} -> {lr:.3g} (ppo.learning_rate)")
+    new = jax.device_put(jp.asarray(lr, saved.dtype), saved.sharding)
+    return state.replace(opt_state=train_lib.set_learning_rate(state.opt_state, new))
 
 
 def _check_finite(metrics: dict, it: int, last_saved, directory) -> None:

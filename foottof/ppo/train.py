@@ -130,7 +130,7 @@ def _make_optimizer(learning_rate: float, max_grad_norm: float) -> optax.Gradien
     return optax.inject_hyperparams(inner)(learning_rate=learning_rate)
 
 
-def _set_learning_rate(opt_state, lr):
+def set_learning_rate(opt_state, lr):
     return opt_state._replace(hyperparams={**opt_state.hyperparams, "learning_rate": lr})
 
 
@@ -314,7 +314,7 @@ def sgd_step(networks: net.Networks, optimizer, settings: Settings, carry, mb: l
             settings.lr_min,
             settings.lr_max,
         )
-        opt_state = _set_learning_rate(opt_state, lr)
+        opt_state = set_learning_rate(opt_state, lr)
     metrics["ppo/learning_rate_mean"] = opt_state.hyperparams["learning_rate"]  # this update's
     updates, opt_state = optimizer.update(grads, opt_state, params)
     params = optax.apply_updates(params, updates)

@@ -19,6 +19,7 @@ def get_section() -> ml_collections.ConfigDict:
     c.gae_lambda = 0.95  # GAE lambda
     c.clip_param = 0.2  # PPO ratio clip epsilon (also the value clip when clipped value loss is on)
     c.value_loss_coef = 1.0  # weight of the value loss
+    c.reconstruction_weight = 0.5  # distillation: weight of the decoder's loss (Miki et al. 2022)
     c.use_clipped_value_loss = True  # clip the value change around the rollout value (rsl_rl)
     c.entropy_coef = 0.005  # weight of the entropy bonus
     c.max_grad_norm = 1.0  # global gradient-norm clip
@@ -35,6 +36,9 @@ def get_network_section() -> ml_collections.ConfigDict:
     c.actor_hidden = (512, 256, 128)  # actor MLP head hidden widths after the LSTM
     c.critic_hidden = (512, 256, 128)  # critic MLP head hidden widths after the LSTM
     c.obs_skip = False  # True: each head reads [LSTM output, normalized obs] (lstm policy only)
+    # distillation: a decoder on the actor's memory reconstructs the first N privileged inputs
+    # of the teacher (36: the foot patches), trained with ppo.reconstruction_weight; 0: none
+    c.reconstruct = 0
     c.activation = "elu"  # MLP activation: 'elu', 'relu', 'tanh' or 'silu'
     c.init_noise_std = 1.0  # initial action std (state-independent, learned as log std)
     c.max_noise_std = 0.0  # cap on the learned action std; 0 = no cap (rsl_rl has none)

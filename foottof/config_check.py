@@ -281,6 +281,7 @@ RULES = {
     "ppo.gae_lambda": _frac,
     "ppo.clip_param": _pos,
     "ppo.value_loss_coef": _nonneg,
+    "ppo.reconstruction_weight": _nonneg,
     "ppo.use_clipped_value_loss": _bool,
     "ppo.entropy_coef": _nonneg,
     "ppo.max_grad_norm": _pos,
@@ -294,6 +295,7 @@ RULES = {
     "network.init_noise_std": _pos,
     "network.max_noise_std": _nonneg,
     "network.obs_skip": _bool,
+    "network.reconstruct": _int(0, 153),  # observations.ACTOR_TERRAIN_INPUTS
     "network.normalize_observations": _bool,
     "network.normalizer_std_eps": _pos,
     "train.num_iterations": _int(1),

@@ -29,6 +29,8 @@ ADDED_FIELDS = {
     "terrain.stretch_prob": 0.0,  # off: every episode on its curriculum level's row
     "terrain.stretch_min_level": 7,  # read only when stretch_prob is on
     "network.obs_skip": False,  # off: the heads read the LSTM output only
+    "network.reconstruct": 0,  # no belief decoder
+    "ppo.reconstruction_weight": 0.5,  # read only with network.reconstruct > 0
     "reward.scales.task": 0.0,  # off: no position reward in the last task_window_s
     "reward.task_window_s": 2.0,  # read only when the task term is on
     "reward.guidance_goal_pay": True,  # guidance pays full credit within the success radius

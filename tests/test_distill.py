@@ -180,3 +180,49 @@ def test_student_view_size_counts_the_privileged_inputs_it_is_given():
             ValueError, match=rf"student_privileged_inputs={bad} must be in \[0, 153\]"
         ):
             teacher.student_view_size(n, bad)
+
+
+def test_belief_decoder_learns_the_privileged_input_the_student_remembers(teacher_and_student):
+    """network.reconstruct = 1 on the toy: the decoder on the student's memory is trained to
+    output the teacher's extra input (the cue, +-1, shown to the student at step 0 only). A
+    memoryless decoder's best mean squared error is 7/8 (the cue's variance 1 at 7 of 8 steps);
+    one reading the memory that recalls the cue gets near 0. The decoder leaves the actions and
+    the cut from the teacher as without it (its own leaves keep their init)."""
+    tenv, _, teacher, *_ = teacher_and_student
+    obs = {"state": jp.zeros((2, 2)), distill.TEACHER_OBS_KEY: jp.array([[1.0, 2, 3], [4, 5, 6]])}
+    np.testing.assert_array_equal(distill.reconstruction_target(obs, 1), [[3.0], [6.0]])
+    denv = distill.TeacherEnv(tenv, teacher, student_obs_size=2)
+    cfg = small_cfg("lstm", lr_schedule="fixed", learning_rate=3e-3)
+    cfg.train.teacher = "toy"
+    cfg.network.reconstruct = 1
+    strain = train_lib.make_train(denv, cfg)
+    state = strain.init(jax.random.PRNGKey(1))
+    assert set(state.params["params"]["decoder"]) == {"dense_0", "out"}
+    history = []
+    for _ in range(30):
+        state, m = strain.iteration(state)
+        history.append({k: float(v) for k, v in m.items()})
+    rec = [h["loss/reconstruction"] for h in history]
+    assert rec[0] > 0.5 and np.mean(rec[-5:]) < 0.1, rec
+    for h in history:
+        want = h["loss/imitation"] + 0.5 * h["loss/reconstruction"]
+        assert h["loss/policy"] == pytest.approx(want, rel=1e-5)
+    # the actions are the plain unroll's
+    s = jax.jit(denv.reset)(jax.random.split(jax.random.PRNGKey(3), 4))
+    seq = jax.tree.map(lambda x: jp.stack([x] * 3), s.obs)
+    resets = jp.array([[True] * 4, [False] * 4, [False] * 4])
+    nets, carry = strain.networks, strain.networks.init_carry(4)
+    means, recon = nets.unroll_reconstruction(state.params, state.normalizer, carry, seq, resets)
+    plain, _, _ = nets.unroll(state.params, state.normalizer, carry, seq, resets)
+    np.testing.assert_allclose(means, plain, rtol=1e-6)
+    assert recon.shape == (3, 4, 1)
+    # cut from an LSTM teacher of the same size: the decoder keeps its init, the rest is cut
+    tcfg = small_cfg("lstm")
+    ttrain = train_lib.make_train(tenv, tcfg)
+    tstate = ttrain.init(jax.random.PRNGKey(0))
+    s0 = strain.init(jax.random.PRNGKey(1))
+    params, _ = distill.student_from_teacher(
+        s0.params, s0.normalizer, tstate.params, tstate.normalizer
+    )
+    assert tree_equal(params["params"]["decoder"], s0.params["params"]["decoder"])
+    assert tree_equal(params["params"]["actor"], tstate.params["params"]["actor"])

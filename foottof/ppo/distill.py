@@ -80,21 +80,50 @@ class TeacherEnv:
         return self._wrap(nxt, carry, nxt.done.astype(bool))  # a new episode: fresh teacher carry
 
 
-def distill_loss(params, networks: net.Networks, normalizer, batch) -> tuple[jax.Array, dict]:
+def reconstruction_target(obs: dict, size: int) -> jax.Array:
+    """(..., size) the first ``size`` of the teacher's inputs the student does not read: its
+    terrain inputs after the student's own (foot patches first, for the ToF env)."""
+    start = obs[net.ACTOR_KEY].shape[-1]
+    return obs[TEACHER_OBS_KEY][..., start : start + size]
+
+
+def distill_loss(
+    params, networks: net.Networks, normalizer, batch, reconstruction_weight: float = 0.0
+) -> tuple[jax.Array, dict]:
     """Mean squared error between the student's action means (re-run over the rollout from its
-    stored carry) and the teacher's actions, over (T, B, A); rsl_rl's ``loss_type="mse"``.
+    stored carry) and the teacher's actions, over (T, B, A); rsl_rl's ``loss_type="mse"``. With
+    a belief decoder (network.reconstruct = K > 0) plus ``reconstruction_weight`` x the mean
+    squared error of its output against the first K privileged inputs
+    (:func:`reconstruction_target`), Miki et al. 2022's student loss.
 
     Returns:
-      (loss, metrics): 'loss/imitation' (the loss), and for the trainer's guards and progress
-      line 'loss/policy' (= the imitation loss), 'loss/value' 0, 'loss/entropy' (of the action
-      std, not trained), 'ppo/kl' 0, 'ppo/clip_fraction' 0.
+      (loss, metrics): 'loss/imitation' (the action term), 'loss/reconstruction' (the decoder's
+      term, unweighted; with a decoder only), and for the trainer's guards and progress line
+      'loss/policy' (= the whole loss), 'loss/value' 0, 'loss/entropy' (of the action std, not
+      trained), 'ppo/kl' 0, 'ppo/clip_fraction' 0.
     """
-    means, log_std, _ = networks.unroll(params, normalizer, batch.carry, batch.obs, batch.resets)
+    size = networks.module.reconstruct_size
+    if size:  # static
+        means, recon = networks.unroll_reconstruction(
+            params, normalizer, batch.carry, batch.obs, batch.resets
+        )
+        log_std = networks.action_log_std(params)
+    else:
+        means, log_std, _ = networks.unroll(
+            params, normalizer, batch.carry, batch.obs, batch.resets
+        )
     target = jax.lax.stop_gradient(batch.obs[TEACHER_ACTION_KEY])
-    loss = jp.mean(jp.square(means - target))
+    imitation = jp.mean(jp.square(means - target))
+    loss, extra = imitation, {}
+    if size:
+        heights = jax.lax.stop_gradient(reconstruction_target(batch.obs, size))
+        rec = jp.mean(jp.square(recon - heights))
+        loss = imitation + reconstruction_weight * rec
+        extra = {"loss/reconstruction": rec}
     zero = jp.zeros(())
     return loss, {
-        "loss/imitation": loss,
+        "loss/imitation": imitation,
+        **extra,
         "loss/policy": loss,
         "loss/value": zero,
         "loss/entropy": jp.mean(net.gaussian_entropy(log_std)),
@@ -106,9 +135,12 @@ def distill_loss(params, networks: net.Networks, normalizer, batch) -> tuple[jax
 def student_from_teacher(student_params, student_normalizer, teacher_params, teacher_normalizer):
     """The student's initial params and normalizer cut from the teacher's (Extreme Parkour
     initialises its student from the teacher's actor): every leaf copied, the actor's input
-    leaves (the LSTM input kernels, the 'state' normalizer) cut to the student's first inputs.
+    leaves (the LSTM input kernels, the 'state' normalizer) cut to the student's first inputs;
+    a student's belief decoder (network.reconstruct), which the teacher lacks, kept as given.
     Returns None when the two networks differ otherwise (e.g. an MLP teacher, another size).
     """
+
+    from flax import traverse_util
 
     def cut(s, t):
         s, t = np.asarray(s), np.asarray(t)
@@ -119,9 +151,15 @@ def student_from_teacher(student_params, student_normalizer, teacher_params, tea
         raise ValueError(f"shape {t.shape} does not cut to {s.shape}")
 
     try:
-        if jax.tree.structure(student_params) != jax.tree.structure(teacher_params):
+        # a student's belief decoder (network.reconstruct) has no teacher leaves: it keeps its init
+        flat_s = traverse_util.flatten_dict(student_params)
+        flat_t = traverse_util.flatten_dict(teacher_params)
+        own = {k for k in flat_s if k[:2] == ("params", "decoder")}
+        if set(flat_s) - own != set(flat_t):
             return None
-        params = jax.tree.map(cut, student_params, teacher_params)
+        params = traverse_util.unflatten_dict(
+            {k: (v if k in own else cut(v, flat_t[k])) for k, v in flat_s.items()}
+        )
         normalizer = jax.tree.map(cut, student_normalizer, teacher_normalizer)
     except ValueError:
         return None

@@ -84,6 +84,7 @@ class ActorCritic(nn.Module):
     init_noise_std: float
     max_noise_std: float = 0.0  # cap on the action std (0: none); see Networks.action_log_std
     obs_skip: bool = False  # heads read [LSTM output, obs] (network.obs_skip)
+    reconstruct_size: int = 0  # a decoder of this many privileged inputs (network.reconstruct)
 
     @nn.compact
     def __call__(self, carry: Carry, actor_obs: jax.Array, critic_obs: jax.Array):
@@ -100,6 +101,11 @@ class ActorCritic(nn.Module):
                 xa = jp.concatenate([xa, actor_obs], axis=-1)
                 xc = jp.concatenate([xc, critic_obs], axis=-1)
         mean = MLP(self.actor_hidden, self.action_size, self.activation, 0.01, name="actor")(xa)
+        if self.reconstruct_size:  # static: a student's belief decoder (read by distillation)
+            recon = MLP(
+                self.actor_hidden, self.reconstruct_size, self.activation, 1.0, name="decoder"
+            )
+            self.sow("intermediates", "reconstruction", recon(xa))
         value = MLP(self.critic_hidden, 1, self.activation, 1.0, name="critic")(xc)[..., 0]
         log_std = self.param(
             "log_std", nn.initializers.constant(math.log(self.init_noise_std)), (self.action_size,)
@@ -238,6 +244,30 @@ class Networks:
         _, (means, log_stds, values) = jax.lax.scan(f, carry, (obs, resets))
         return means, log_stds[0], values
 
+    def unroll_reconstruction(
+        self, params: Params, normalizer, carry: Carry, obs: Obs, resets: jax.Array
+    ):
+        """:meth:`unroll` with the decoder's output (network.reconstruct > 0): the privileged
+        inputs the actor's memory reconstructs at each step (Miki et al. 2022's belief decoder).
+
+        Returns:
+          (means (T, B, A), reconstructions (T, B, reconstruct)).
+        """
+
+        def f(c, xs):
+            o, r = xs
+            if self.recurrent:
+                init = self.init_carry(r.shape[0])
+                c = jax.tree.map(lambda i, x: jp.where(r[:, None], i, x), init, c)
+            actor_obs, critic_obs = split_obs(self.normalize(normalizer, o))
+            (c, mean, _, _), state = self.module.apply(
+                params, c, actor_obs, critic_obs, mutable=["intermediates"]
+            )
+            return c, (mean, state["intermediates"]["reconstruction"][0])
+
+        _, (means, recons) = jax.lax.scan(f, carry, (obs, resets))
+        return means, recons
+
     def policy_fn(self, params: Params, normalizer, deterministic: bool = True):
         """(carry, obs, reset (B,), key) -> (carry, action (B, A)); mean if deterministic."""
 
@@ -272,5 +302,6 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
         init_noise_std=float(n.init_noise_std),
         max_noise_std=max_std,
         obs_skip=obs_skip,
+        reconstruct_size=int(read_added(n, "network.reconstruct")),
     )
     return Networks(module, bool(n.normalize_observations), float(n.normalizer_std_eps))

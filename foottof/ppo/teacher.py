@@ -44,20 +44,23 @@ def load_teacher(path: str, env, network_cfg):
 
 
 def teacher_network_cfg(path: str, default):
-    """The teacher's c.network from its run config (config.json beside or above ``path``)."""
+    """The teacher's c.network from its run config (config.json beside or above ``path``); the
+    student's ``default`` where it has none, without the student's belief decoder."""
     import ml_collections
 
     from foottof.ppo import run_dir as run_dirs
 
-    config = run_dirs.run_config_path(path)
-    if config is None:
-        return default
-    with open(config) as f:
-        saved = json.load(f).get("network")
-    if not saved:
-        return default
     out = ml_collections.ConfigDict(dict(default))
-    for k, v in saved.items():
+    if "reconstruct" in out:
+        out.reconstruct = (
+            0  # the student's belief decoder (network.reconstruct) is not the teacher's
+        )
+    config = run_dirs.run_config_path(path)
+    saved = None
+    if config is not None:
+        with open(config) as f:
+            saved = json.load(f).get("network")
+    for k, v in (saved or {}).items():
         if k in out:
             out[k] = tuple(v) if isinstance(v, list) else v
     return out

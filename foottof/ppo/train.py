@@ -159,6 +159,7 @@ class Settings:
     entropy_coef: float
     use_clipped_value_loss: bool
     distilling: bool  # train.teacher set: the imitation loss (foottof.ppo.distill) replaces PPO's
+    reconstruction_weight: float = 0.0  # distillation with a belief decoder (network.reconstruct)
 
     @classmethod
     def from_config(cls, cfg: ml_collections.ConfigDict) -> "Settings":
@@ -180,6 +181,7 @@ class Settings:
             entropy_coef=float(ppo.entropy_coef),
             use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
             distilling=bool(train_cfg is not None and read_added(train_cfg, "train.teacher")),
+            reconstruction_weight=float(read_added(ppo, "ppo.reconstruction_weight")),
         )
 
     def loss_kwargs(self) -> dict:
@@ -300,7 +302,9 @@ def sgd_step(networks: net.Networks, optimizer, settings: Settings, carry, mb: l
     params, opt_state, normalizer = carry
     if settings.distilling:  # static
         grad_fn = jax.value_and_grad(distill.distill_loss, has_aux=True)
-        (_, metrics), grads = grad_fn(params, networks, normalizer, mb)
+        (_, metrics), grads = grad_fn(
+            params, networks, normalizer, mb, settings.reconstruction_weight
+        )
     else:
         grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
         (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **settings.loss_kwargs())

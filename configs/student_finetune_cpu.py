@@ -11,9 +11,8 @@ from configs import stage1_arrive_cpu
 def get_config():
     c = stage1_arrive_cpu.get_config()
     c.train.init_from = "policies/student"  # the distilled student (run or policy folder)
-    c.network.reconstruct = (
-        36  # the student's belief decoder (configs/distill_belief_cpu.py): kept, not trained by PPO
-    )
+    # the student's belief decoder (configs/distill_belief_cpu.py): kept, not trained by PPO
+    c.network.reconstruct = 36
     c.reward.guidance_decay_start_iteration = 0
     c.reward.guidance_decay_end_iteration = 1  # weight 0 from the first iteration on
     c.train.run_name = "student_finetune_cpu"

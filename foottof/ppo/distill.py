@@ -103,15 +103,12 @@ def distill_loss(
       trained), 'ppo/kl' 0, 'ppo/clip_fraction' 0.
     """
     size = networks.module.reconstruct_size
+    args = (params, normalizer, batch.carry, batch.obs, batch.resets)
     if size:  # static
-        means, recon = networks.unroll_reconstruction(
-            params, normalizer, batch.carry, batch.obs, batch.resets
-        )
-        log_std = networks.action_log_std(params)
+        means, recon = networks.unroll_reconstruction(*args)
     else:
-        means, log_std, _ = networks.unroll(
-            params, normalizer, batch.carry, batch.obs, batch.resets
-        )
+        means = networks.unroll(*args)[0]
+    log_std = networks.action_log_std(params)
     target = jax.lax.stop_gradient(batch.obs[TEACHER_ACTION_KEY])
     imitation = jp.mean(jp.square(means - target))
     loss, extra = imitation, {}

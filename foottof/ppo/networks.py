@@ -220,11 +220,15 @@ class Networks:
         Returns:
           (carry, mean (B, A), log_std (A,), value (B,)).
         """
+        return self.module.apply(params, *self._inputs(normalizer, carry, obs, reset))
+
+    def _inputs(self, normalizer, carry: Carry, obs: Obs, reset: jax.Array):
+        """(carry zeroed where an episode starts, actor obs, critic obs), normalized."""
         if self.recurrent:
             init = self.init_carry(reset.shape[0])
             carry = jax.tree.map(lambda i, c: jp.where(reset[:, None], i, c), init, carry)
         actor_obs, critic_obs = split_obs(self.normalize(normalizer, obs))
-        return self.module.apply(params, carry, actor_obs, critic_obs)
+        return carry, actor_obs, critic_obs
 
     def unroll(self, params: Params, normalizer, carry: Carry, obs: Obs, resets: jax.Array):
         """Re-runs the policy over a rollout from its stored initial carry (truncated BPTT).
@@ -256,12 +260,8 @@ class Networks:
 
         def f(c, xs):
             o, r = xs
-            if self.recurrent:
-                init = self.init_carry(r.shape[0])
-                c = jax.tree.map(lambda i, x: jp.where(r[:, None], i, x), init, c)
-            actor_obs, critic_obs = split_obs(self.normalize(normalizer, o))
             (c, mean, _, _), state = self.module.apply(
-                params, c, actor_obs, critic_obs, mutable=["intermediates"]
+                params, *self._inputs(normalizer, c, o, r), mutable=["intermediates"]
             )
             return c, (mean, state["intermediates"]["reconstruction"][0])
 

@@ -232,6 +232,7 @@ RULES = {
     "env.foot_stuck_depth_m": _num(0.0, 1.0),
     "env.critic_height_scan": _bool,
     "env.actor_terrain": _bool,
+    "env.actor_terrain_seen": _bool,
     "env.max_tilt_deg": _num(0.0, 180.0, lo_open=True),
     "env.init_joint_noise_rad": _nonneg,
     "env.init_roll_pitch_rad": _num(0.0, math.pi / 2),
@@ -557,6 +558,13 @@ def _check_cross(c) -> None:
             )
         _check_section_cross(f"noise.stage{s}", c.noise[f"stage{s}"])
     _check_section_cross("terrain", t)
+    e = c.get("env", {})
+    if e.get("actor_terrain_seen", False) and not e.get("actor_terrain", False):
+        _fail(
+            "env.actor_terrain_seen",
+            True,
+            "needs env.actor_terrain=True (it limits the teacher's terrain inputs to the seen cells)",
+        )
     s = c.sensor
     n_sensors = len(s.sites)
     for name, width in (("tilt_x_deg", None), ("tilt_y_deg", None), ("offset_m", 3)):

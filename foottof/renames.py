@@ -41,6 +41,7 @@ ADDED_FIELDS = {
     "train.teacher": "",  # PPO, no distillation
     "train.student_privileged_inputs": 0,  # the student reads its sensors only
     "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)
+    "env.actor_terrain_seen": False,  # a teacher's terrain inputs are true everywhere
     "env.critic_height_scan": False,  # off: the critic reads no base-centred height scan
     "env.foot_stuck_depth_m": 0.0,  # off: a foot in a gap does not end the episode
     "terrain.no_promotion_on_fall": False,  # a failed episode may still be promoted

@@ -15,6 +15,7 @@ from foottof.envs import observations as obs_lib
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
+from foottof.envs.seen_map import SeenGrid
 from foottof.envs.sensing import select_where
 from foottof.envs.stuck_probe import foot_stuck
 from foottof.envs.task_spec import TaskSpec
@@ -51,6 +52,7 @@ STEP_METRICS = ("task/speed_mps", "task/feet_at_edges", "task/guidance_weight")
 # State.info key of each env's control steps since training began (only where the guidance bias
 # decays, reward.guidance_decay_end_iteration > 0); checkpointed with the env state.
 ENV_STEPS_KEY = "env_steps"
+SEEN_KEY = "seen"  # State.info: (origin, grid) of the ray-hit cells (env.actor_terrain_seen)
 
 
 class StepKinematics(NamedTuple):
@@ -153,6 +155,13 @@ class AnymalToFEnv(Env):
         self.episode_steps = int(round(float(ecfg.episode_length_s) / self.dt))
         self._push_interval = max(int(round(float(ecfg.push_interval_s) / self.dt)), 2)
         self.sensing = sensing.Sensing(cfg, source, self.hfield, self.shank_scale)
+        # env.actor_terrain_seen: the cells the foot rays have hit, spawn-anchored, over the tile
+        self.seen_grid = SeenGrid(
+            cell_m=float(cfg.terrain.cell_m),
+            back_m=1.0,
+            ahead_m=float(cfg.terrain.tile_length_m) + 1.0,
+            half_width_m=float(cfg.terrain.tile_width_m) / 2.0,
+        )
         self._obs_sizes = None
 
     # ----------------------------------------------------------------------------------------
@@ -224,7 +233,11 @@ class AnymalToFEnv(Env):
         meas = self._measure(key_meas, next_d, next_task.params)
         done = ends.done
         sensor_state, sense = self.sensing.step(state.info["sensor"], key_sense, next_d, meas, done)
-        obs = self._observe(next_d, next_task, sense, meas)
+        seen = None
+        if self.spec.actor_terrain_seen:  # static: a fresh grid where done, then this step's rays
+            seen = select_where(done, self._fresh_seen(next_task), state.info[SEEN_KEY])
+            seen = self._mark_seen(seen, sense)
+        obs = self._observe(next_d, next_task, sense, meas, seen)
         speed = jp.linalg.norm(d.qvel[0:2])
         metrics = {f"reward/{k}": v for k, v in terms.items()}
         metrics.update(
@@ -248,6 +261,8 @@ class AnymalToFEnv(Env):
         # bootstrapping V there would pay the at-goal value again forever (10 / (1 - gamma)).
         bootstrap = ends.truncated & self.spec.bootstrap_time_limit
         info.update(task=next_task, sensor=sensor_state, truncation=bootstrap.astype(jp.float32))
+        if seen is not None:
+            info[SEEN_KEY] = seen
         return State(
             pipeline_state=next_d,
             obs=obs,
@@ -477,11 +492,16 @@ class AnymalToFEnv(Env):
             task = task.replace(params=task.params.replace(**overrides))
         meas = self._measure(key_meas, d, task.params)
         sensor_state, sense = self.sensing.reset(key_sense, d, meas)
-        obs = self._observe(d, task, sense, meas)
+        seen = None
+        if self.spec.actor_terrain_seen:  # static
+            seen = self._mark_seen(self._fresh_seen(task), sense)
+        obs = self._observe(d, task, sense, meas, seen)
         zero = jp.zeros(())
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
         metrics.update({k: zero for k in EPISODE_METRICS + STEP_METRICS})
         info = {"task": task, "sensor": sensor_state, "truncation": zero}
+        if seen is not None:
+            info[SEEN_KEY] = seen
         if self.spec.reward.guidance_decay[1] > 0:  # static: count this env's steps for the decay
             info[ENV_STEPS_KEY] = jp.zeros((), jp.int32)
         return State(
@@ -536,7 +556,39 @@ class AnymalToFEnv(Env):
         lin, ang = noisy_odometry(k2, lin_b, d.qvel[3:6], p.odometry_level)
         return sensing.Measurements(q=q, lin_vel=lin, ang_vel=ang)
 
-    def _observe(self, d, task: TaskState, sense, meas: sensing.Measurements) -> dict:
+    def _fresh_seen(self, task: TaskState) -> tuple[jax.Array, jax.Array]:
+        """(origin, seen) of an episode's empty grid of ray-hit cells, anchored at its spawn."""
+        return self.seen_grid.init(task.spawn[:2])
+
+    def _mark_seen(self, seen, sense) -> tuple[jax.Array, jax.Array]:
+        """``seen`` with the cells of this step's noise-free ray hits of every foot sensor."""
+        origin, grid = seen
+        pts = sense.hit_points.reshape(-1, 3)
+        return origin, self.seen_grid.mark(origin, grid, pts, sense.hit_valid.reshape(-1))
+
+    def _actor_terrain(self, seen, fk, patches, scan, base_pos, base_quat) -> jax.Array:
+        """The teacher's terrain inputs (env.actor_terrain): the foot patches (36) and the base
+        scan up to 0.6 m ahead (117), true heights; with env.actor_terrain_seen, each point only
+        where a foot sensor's ray has hit its cell this episode, else flat ground at the nominal
+        stance (a patch: -foot radius below the foot centre; the scan: -stand height below the
+        base), followed by the 153 seen flags {0, 1}."""
+        n = obs_lib.ACTOR_SCAN_POINTS
+        heights = jp.concatenate([patches, scan[:n]])
+        if not self.spec.actor_terrain_seen:  # static
+            return heights
+        pts = jp.concatenate(
+            [
+                obs_lib.foot_patch_points(fk.foot_pos).reshape(-1, 2),
+                obs_lib.world_scan_points(base_pos, base_quat)[:n],
+            ]
+        )
+        flags = self.seen_grid.lookup(seen[0], seen[1], pts)
+        fill = jp.concatenate(
+            [jp.full(patches.shape, -self.foot_radius_m), jp.full((n,), -self._stand_height)]
+        )
+        return jp.concatenate([jp.where(flags, heights, fill), flags.astype(jp.float32)])
+
+    def _observe(self, d, task: TaskState, sense, meas: sensing.Measurements, seen=None) -> dict:
         """Actor and critic observations.
 
         Actor ``state`` (size 181 for 4 sensors x 16 zones): tof readings (F x Z [m]) + validity
@@ -546,7 +598,9 @@ class AnymalToFEnv(Env):
         5 m) + goal direction in the base frame (2, unit) + time left (1, fraction) + last
         action (12); with ``env.actor_terrain`` (a teacher) also the true terrain heights
         around each foot (4 x 9, as the critic's) and the base scan up to 0.6 m ahead (117, the
-        first ACTOR_SCAN_ROWS rows of the critic's); the layout: foottof.envs.observations.
+        first ACTOR_SCAN_ROWS rows of the critic's); with ``env.actor_terrain_seen`` those only
+        where a foot ray has hit, and 153 seen flags (:meth:`_actor_terrain`); the layout:
+        foottof.envs.observations.
         Critic ``privileged_state``: the same without noise (true readings, joints, velocities)
         + true terrain heights around each foot relative to the foot centre (4 x 9, 10 cm grid)
         + foot contacts (4) + friction (1) + added base mass (1, x0.1) + with
@@ -593,7 +647,8 @@ class AnymalToFEnv(Env):
             parts.append(scan)
         priv = jp.concatenate(parts)
         if self.spec.actor_terrain:  # static: a teacher's actor also sees the terrain, true
-            state_obs = jp.concatenate([state_obs, patches, scan[: obs_lib.ACTOR_SCAN_POINTS]])
+            terrain = self._actor_terrain(seen, fk, patches, scan, qpos[0:3], base_quat)
+            state_obs = jp.concatenate([state_obs, terrain])
         lim = self.spec.clip_observations
         return {
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),

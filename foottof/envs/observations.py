@@ -13,6 +13,14 @@ from foottof.robot import kinematics
 ACTOR_SCAN_ROWS = 13
 ACTOR_SCAN_POINTS = ACTOR_SCAN_ROWS * 9
 ACTOR_TERRAIN_INPUTS = 4 * 9 + ACTOR_SCAN_POINTS  # what env.actor_terrain appends (153)
+
+
+def actor_terrain_size(seen: bool) -> int:
+    """How many inputs env.actor_terrain appends: 153 heights, and with env.actor_terrain_seen
+    their 153 seen flags after them (306)."""
+    return ACTOR_TERRAIN_INPUTS * (2 if seen else 1)
+
+
 # The critic's terrain patch around each foot centre: a 3 x 3 grid, 10 cm apart [m].
 FOOT_PATCH_OFFSETS_M = tuple((dx, dy) for dx in (-0.1, 0.0, 0.1) for dy in (-0.1, 0.0, 0.1))
 

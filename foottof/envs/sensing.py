@@ -42,6 +42,9 @@ class Sense:
       age_s: (F,) age of the delivered frames [s].
       true_distance: (F, Z) noise-free ``tof`` readings at this step [m] (critic).
       true_valid: (F, Z) float validity of the noise-free readings.
+      hit_points: (F, R, 3) world points [m] the noise-free frame's rays hit (every ray of the
+        real foot sensors, true poses; env.actor_terrain_seen marks them).
+      hit_valid: (F, R) bool, the ray hit the terrain within range.
     """
 
     distance: jax.Array
@@ -49,6 +52,8 @@ class Sense:
     age_s: jax.Array
     true_distance: jax.Array
     true_valid: jax.Array
+    hit_points: jax.Array
+    hit_valid: jax.Array
 
 
 @struct.dataclass
@@ -108,10 +113,14 @@ class Sensing:
 
     def true_reading(self, d) -> tof.ToFReading:
         """Noise-free frame of the real foot sensors (true poses of the physics model)."""
+        return self._true_frame(d)[0]
+
+    def _true_frame(self, d):
+        """(noise-free reading, ray hit points (F, R, 3), hit (F, R)) of the real foot sensors."""
         fk = kinematics.world_foot_kinematics(d.qpos, self.shank_scale)
         pos = fk.tof_pos[self._feet_idx]
         rot = fk.tof_rot[self._feet_idx]
-        return tof.sense(self.spec, self.hfield, pos, rot)
+        return tof.sense_and_hits(self.spec, self.hfield, pos, rot)
 
     def _source_reading(self, d, meas: Measurements, emap, true):
         base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
@@ -123,13 +132,15 @@ class Sensing:
             )
         return mock.mock_aggre_readings(self.spec, emap, base_quat, meas.q, self.feet)
 
-    def _sense(self, obs: timing.ToFObs, true: tof.ToFReading) -> Sense:
+    def _sense(self, obs: timing.ToFObs, true: tof.ToFReading, points, hit) -> Sense:
         return Sense(
             distance=obs.distance_m,
             valid=obs.valid.astype(jp.float32),
             age_s=obs.age_s,
             true_distance=true.distance_m,
             true_valid=true.valid.astype(jp.float32),
+            hit_points=points,
+            hit_valid=hit,
         )
 
     def reset(self, key, d, meas: Measurements) -> tuple[SensingState, Sense]:
@@ -137,10 +148,11 @@ class Sensing:
         emap = None
         if self.source == "mock_aggre":
             emap = em.aggre_init(self.hfield, d.qpos[0:3], d.qpos[3:7], with_flags=False)
-        true = self.true_reading(d)
+        true, points, hit = self._true_frame(d)
         reading = self._source_reading(d, meas, emap, true)
         tstate, obs = timing.reset(self.timing, self.bounds, self.model, key, reading)
-        return SensingState(tof=tstate, emap=_without_scan(emap)), self._sense(obs, true)
+        sense = self._sense(obs, true, points, hit)
+        return SensingState(tof=tstate, emap=_without_scan(emap)), sense
 
     def step(
         self, state: SensingState, key, d, meas: Measurements, done
@@ -164,13 +176,13 @@ class Sensing:
                 reset=done,
                 with_flags=False,  # the masks are diagnostics; without them: one fused loop
             )
-        true = self.true_reading(d)
+        true, points, hit = self._true_frame(d)
         reading = self._source_reading(d, meas, emap, true)
         t_step, o_step = timing.step(self.timing, self.model, state.tof, reading, key_step)
         t_reset, o_reset = timing.reset(self.timing, self.bounds, self.model, key_reset, reading)
         tof = select_where(done, t_reset, t_step)
         return SensingState(tof=tof, emap=_without_scan(emap)), self._sense(
-            select_where(done, o_reset, o_step), true
+            select_where(done, o_reset, o_step), true, points, hit
         )
 
 

@@ -40,6 +40,7 @@ class TaskSpec:
     clip_observations: float
     critic_height_scan: bool
     actor_terrain: bool
+    actor_terrain_seen: bool  # the teacher's terrain only where a foot ray has hit (+ flags)
     steps_per_iteration: int  # control steps each env takes per training iteration
     reward: RewardSpec  # the reward section (terms, scales, success radius, guidance decay)
     randomization: RandomizationSpec  # the env.randomization section
@@ -73,6 +74,7 @@ class TaskSpec:
             clip_observations=float(e.clip_observations),
             critic_height_scan=bool(read_added(e, "env.critic_height_scan")),
             actor_terrain=bool(read_added(e, "env.actor_terrain")),
+            actor_terrain_seen=bool(read_added(e, "env.actor_terrain_seen")),
             steps_per_iteration=int(cfg.ppo.num_steps),
             reward=RewardSpec.from_config(cfg.reward),
             randomization=RandomizationSpec.from_config(e.randomization),

@@ -167,7 +167,7 @@ def run_config_path(checkpoint: str) -> str | None:
 
 
 # Env fields that shape the network's inputs: taken from the run config along with c.network.
-RUN_INPUT_FIELDS = ("critic_height_scan", "actor_terrain")
+RUN_INPUT_FIELDS = ("critic_height_scan", "actor_terrain", "actor_terrain_seen")
 
 
 def with_run_network(cfg, checkpoint: str | None):

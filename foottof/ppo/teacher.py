@@ -66,6 +66,18 @@ def teacher_network_cfg(path: str, default):
     return out
 
 
+def teacher_sees_only_seen(path: str) -> bool:
+    """The teacher's env.actor_terrain_seen, from its run config (False where it has none)."""
+    from foottof.ppo import run_dir as run_dirs
+
+    config = run_dirs.run_config_path(path)
+    if config is None:
+        return False
+    with open(config) as f:
+        env = json.load(f).get("env", {})
+    return bool(read_added(env, "env.actor_terrain_seen"))
+
+
 def check_teacher_path(path: str) -> None:
     if not os.path.exists(path):
         raise FileNotFoundError(
@@ -74,16 +86,17 @@ def check_teacher_path(path: str) -> None:
         )
 
 
-def student_view_size(teacher_obs_size: int, privileged_inputs: int = 0) -> int:
+def student_view_size(teacher_obs_size: int, privileged_inputs: int = 0, seen: bool = False) -> int:
     """How many of the teacher's actor inputs a ToF student reads: its own (the teacher's minus
-    the ACTOR_TERRAIN_INPUTS that env.actor_terrain appends) and the first ``privileged_inputs``
-    of those (train.student_privileged_inputs, a diagnostic: 36 = the true foot patches).
+    the terrain inputs env.actor_terrain appends: 153, or 306 with env.actor_terrain_seen =
+    ``seen``) and the first ``privileged_inputs`` of those (train.student_privileged_inputs, a
+    diagnostic: 36 = the foot patches).
 
     Raises:
       ValueError: naming the value and its range, when ``privileged_inputs`` is outside
         [0, ACTOR_TERRAIN_INPUTS].
     """
-    from foottof.envs.observations import ACTOR_TERRAIN_INPUTS
+    from foottof.envs.observations import ACTOR_TERRAIN_INPUTS, actor_terrain_size
 
     if not 0 <= int(privileged_inputs) <= ACTOR_TERRAIN_INPUTS:
         raise ValueError(
@@ -91,7 +104,7 @@ def student_view_size(teacher_obs_size: int, privileged_inputs: int = 0) -> int:
             f"[0, {ACTOR_TERRAIN_INPUTS}] (the teacher's terrain inputs: 36 foot patches, then "
             f"the base scan)"
         )
-    return int(teacher_obs_size) - ACTOR_TERRAIN_INPUTS + int(privileged_inputs)
+    return int(teacher_obs_size) - actor_terrain_size(seen) + int(privileged_inputs)
 
 
 def make_distill_env(cfg):
@@ -111,14 +124,18 @@ def make_distill_env(cfg):
             "env.actor_terrain=True in a distillation config: the config is the student's "
             "(sensors only); the teacher's terrain inputs are added for it"
         )
+    seen = teacher_sees_only_seen(path)
     full = cfg.copy_and_resolve_references()
     with full.unlocked():
         full.env.actor_terrain = True
+        full.env.actor_terrain_seen = seen  # as the teacher was trained
     env = make_training_env(full)
     teacher = load_teacher(path, env, teacher_network_cfg(path, cfg.network))
     shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
     student_obs_size = student_view_size(
-        shape.obs[net.ACTOR_KEY].shape[-1], read_added(cfg.train, "train.student_privileged_inputs")
+        shape.obs[net.ACTOR_KEY].shape[-1],
+        read_added(cfg.train, "train.student_privileged_inputs"),
+        seen,
     )
     _, t_params, t_norm = teacher
 

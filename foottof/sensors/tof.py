@@ -302,6 +302,11 @@ def cast_rays(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot):
 
 
 def sense(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot) -> ToFReading:
+    """The reading of :func:`sense_and_hits` (see there)."""
+    return sense_and_hits(spec, hfield, site_pos, site_rot)[0]
+
+
+def sense_and_hits(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot):
     """Noise-free VL53L5CX frame of every sensor of one robot.
 
     Casts ``spec.num_rays`` rays per sensor (41 for 4x4) against the heightfield up to
@@ -317,9 +322,10 @@ def sense(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot) -> ToFReading:
       site_rot: (F, 3, 3) site axes as columns (``d.site_xmat[ids].reshape(-1, 3, 3)``).
 
     Returns:
-      ToFReading with (F, Z) arrays.
+      (ToFReading with (F, Z) arrays, hit points (F, R, 3) world [m] of every ray, hit (F, R)
+      bool: the ray hit the terrain within ``max_range_m``; where not, the point is the origin).
     """
-    _, dirs, t, n = cast_rays(spec, hfield, site_pos, site_rot)
+    origins, dirs, t, n = cast_rays(spec, hfield, site_pos, site_rot)
     hit = t >= 0.0
     dist, nearest = zone_minimum(spec, t, hit, dirs)
     zr = jp.asarray(spec.zone_rays())
@@ -337,8 +343,10 @@ def sense(spec: ToFSpec, hfield: Heightfield, site_pos, site_rot) -> ToFReading:
     q = spec.resolution_m
     dist_q = jp.minimum(jp.round(dist / q) * q, spec.max_range_m)
     incidence = jp.where(valid, jp.arccos(jp.clip(cos_inc, 0.0, 1.0)), 0.0)
-    return ToFReading(
+    reading = ToFReading(
         distance_m=jp.where(valid, dist_q, spec.max_range_m).astype(jp.float32),
         valid=valid,
         incidence_rad=incidence.astype(jp.float32),
     )
+    points = origins[:, None, :] + jp.where(hit, t, 0.0)[..., None] * dirs
+    return reading, points, hit

@@ -114,24 +114,45 @@ def _oracle_cells(env, qpos, origin) -> set:
     return cells
 
 
-def test_seen_cells_are_the_cells_mujoco_rays_hit_since_the_episode_began():
-    """Walking with random actions, each env's grid holds exactly the cells that MuJoCo C's rays
-    from the four foot sensors hit at every step since its episode began (a done clears it)."""
-    cfg = _cfg(True)
-    cfg.env.episode_length_s = 0.3  # 15 steps: every episode ends once within the 24
-    env = make_env(cfg)
-    n, steps = 3, 24
+def test_seen_cells_are_mujoco_ray_hits_and_the_teacher_reads_heights_only_there():
+    """Walking with random actions beside a plain teacher's env (same draws):
+
+    - each env's grid holds exactly the cells that MuJoCo C's rays from the four foot sensors
+      hit at every step since its episode began (a done clears it; a seen cell stays seen);
+    - the seen teacher's observation is the plain teacher's, its terrain heights replaced by the
+      nominal flat ground where unseen, followed by the seen flags."""
+    cfg_a, cfg_b = _cfg(False), _cfg(True)
+    for c in (cfg_a, cfg_b):
+        c.env.episode_length_s = 0.3  # 15 steps: every episode ends once within the 24
+    plain, env = make_env(cfg_a), make_env(cfg_b)
+    n, steps, own = 3, 24, 181  # the ToF student's inputs come first in both
     keys = jax.random.split(jax.random.PRNGKey(3), n)
-    state = jax.jit(jax.vmap(env.reset))(keys)
-    step = jax.jit(jax.vmap(env.step))
+    sa, state = jax.jit(jax.vmap(plain.reset))(keys), jax.jit(jax.vmap(env.reset))(keys)
+    step_a, step = jax.jit(jax.vmap(plain.step)), jax.jit(jax.vmap(env.step))
+    fill = np.concatenate([np.full(36, -env.foot_radius_m), np.full(117, -env._stand_height)])
     qpos = [np.asarray(state.pipeline_state.qpos, np.float64)]
     done = [np.zeros(n, bool)]
-    akey = jax.random.PRNGKey(4)
+    prev = np.asarray(state.info["seen"][1])
+    akey, seen_frac = jax.random.PRNGKey(4), []
     for _ in range(steps):
         akey, k = jax.random.split(akey)
-        state = step(state, 0.8 * jax.random.normal(k, (n, 12)))
+        act = 0.8 * jax.random.normal(k, (n, 12))
+        sa, state = step_a(sa, act), step(state, act)
         qpos.append(np.asarray(state.pipeline_state.qpos, np.float64))
         done.append(np.asarray(state.done) > 0)
+        a, b = np.asarray(sa.obs["state"]), np.asarray(state.obs["state"])
+        assert a.shape[-1] == own + 153 and b.shape[-1] == own + 306
+        np.testing.assert_array_equal(a[:, :own], b[:, :own])
+        flags = b[:, own + 153 :]
+        assert set(np.unique(flags)) <= {0.0, 1.0}
+        heights, on = b[:, own : own + 153], flags > 0
+        np.testing.assert_array_equal(heights[on], a[:, own : own + 153][on])
+        np.testing.assert_allclose(heights[~on], np.broadcast_to(fill, heights.shape)[~on], 1e-6)
+        seen_frac.append(on.mean())
+        grid = np.asarray(state.info["seen"][1])
+        assert (grid[~done[-1]] >= prev[~done[-1]]).all()  # a seen cell stays seen
+        prev = grid
+    assert 0 < np.mean(seen_frac) < 0.5  # some of the teacher's points seen, most not
     assert all(np.any(dn) for dn in np.array(done).T)  # each env's grid was cleared once
     origin, grid = (np.asarray(x) for x in state.info["seen"])
     spawn = np.asarray(state.info["task"].spawn[:, :2])
@@ -148,41 +169,6 @@ def test_seen_cells_are_the_cells_mujoco_rays_hit_since_the_episode_began():
         total += len(cells)
     assert total > 150  # the swinging feet's rays swept more than the stance footprints
     assert total_mismatch <= 0.02 * total, (total_mismatch, total)
-
-
-def test_seen_teacher_reads_true_heights_where_seen_and_flat_ground_elsewhere():
-    """The seen teacher's observation is the plain teacher's (same draws), its terrain heights
-    replaced by the nominal flat ground where unseen, followed by the seen flags; the flags
-    never clear within an episode."""
-    plain, seen_env = make_env(_cfg(False)), make_env(_cfg(True))
-    n = 4
-    keys = jax.random.split(jax.random.PRNGKey(5), n)
-    sa, sb = jax.jit(jax.vmap(plain.reset))(keys), jax.jit(jax.vmap(seen_env.reset))(keys)
-    step_a, step_b = jax.jit(jax.vmap(plain.step)), jax.jit(jax.vmap(seen_env.step))
-    own = 181  # the ToF student's inputs come first in both
-    akey = jax.random.PRNGKey(6)
-    prev = np.asarray(sb.info["seen"][1])
-    for _ in range(12):
-        akey, k = jax.random.split(akey)
-        act = 0.8 * jax.random.normal(k, (n, 12))
-        sa, sb = step_a(sa, act), step_b(sb, act)
-        a, b = np.asarray(sa.obs["state"]), np.asarray(sb.obs["state"])
-        assert a.shape[-1] == own + 153 and b.shape[-1] == own + 306
-        np.testing.assert_array_equal(a[:, :own], b[:, :own])
-        flags = b[:, own + 153 :]
-        assert set(np.unique(flags)) <= {0.0, 1.0}
-        heights = b[:, own : own + 153]
-        on = flags > 0
-        np.testing.assert_array_equal(heights[on], a[:, own : own + 153][on])
-        fill = np.concatenate(
-            [np.full(36, -seen_env.foot_radius_m), np.full(117, -seen_env._stand_height)]
-        )
-        np.testing.assert_allclose(heights[~on], np.broadcast_to(fill, heights.shape)[~on], 1e-6)
-        grid = np.asarray(sb.info["seen"][1])
-        alive = np.asarray(sb.done) == 0
-        assert (grid[alive] >= prev[alive]).all()  # a seen cell stays seen
-        prev = grid
-    assert 0 < on.mean() < 0.5  # some of the teacher's points seen, most not
 
 
 def test_seen_needs_a_teacher_and_the_student_drops_the_flags(tmp_path):

@@ -90,11 +90,17 @@ def main():
         "front_feet": float(touch_seen[:2].sum() / max(touch_n[:2].sum(), 1)),
         "hind_feet": float(touch_seen[2:].sum() / max(touch_n[2:].sum(), 1)),
         "seen_share_all_points": float(f.mean()),
-        "seen_share_patch_front": dict(zip(offsets, patch[:, :2].mean((0, 1)).round(3).tolist())),
-        "seen_share_patch_hind": dict(zip(offsets, patch[:, 2:].mean((0, 1)).round(3).tolist())),
+        "seen_share_patch_front": dict(
+            zip(offsets, patch[:, :2].mean((0, 1)).round(3).tolist(), strict=True)
+        ),
+        "seen_share_patch_hind": dict(
+            zip(offsets, patch[:, 2:].mean((0, 1)).round(3).tolist(), strict=True)
+        ),
         "seen_share_scan_rows_m": {
             f"{x:+.1f}": float(v)
-            for x, v in zip(np.linspace(-0.6, 0.6, ACTOR_SCAN_ROWS), scan.mean((0, 2)).round(3))
+            for x, v in zip(
+                np.linspace(-0.6, 0.6, ACTOR_SCAN_ROWS), scan.mean((0, 2)).round(3), strict=True
+            )
         },
     }
     print(json.dumps(out, indent=1))

@@ -3,11 +3,13 @@ rollouts: where each foot touches down, had a foot sensor's ray hit that cell be
 much of its terrain inputs it has seen, by foot-patch position and scan row.
 
     python scripts/seen_coverage.py runs/teacher_seen_cpu [--envs 256] [--steps 300]   # ~2 min
+    python scripts/seen_coverage.py policies/teacher --plain   # the plain teacher, same counts
 
-Fresh episodes at the curriculum's starting levels of configs/teacher_seen_cpu.py (levels 0-1 of
-every stage-1 type). A touchdown is a foot whose contact flag (the critic's) goes 0 -> 1; its
+Fresh episodes at the curriculum's starting levels of configs/teacher_seen_cpu.py (levels 0-2 of
+every stage-1 type; ``--max-level L``: levels 0-L). A touchdown is a foot whose contact flag (the critic's) goes 0 -> 1; its
 cell is looked up in the grid of the step before (what the foot sensors had hit until then).
-Prints JSON: touchdowns, the share on seen cells (front and hind feet), the share of the
+With ``--plain`` the policy is a plain teacher (env.actor_terrain): it reads the true heights
+everywhere and the grid only counts what its rays hit. Prints JSON: touchdowns, the share on seen cells (front and hind feet), the share of the
 teacher's 153 terrain points seen, by patch offset (front / hind feet) and by scan row.
 """
 
@@ -23,8 +25,8 @@ import jax.numpy as jp  # noqa: E402
 import numpy as np  # noqa: E402
 
 from configs import teacher_seen_cpu  # noqa: E402
-from foottof.envs import make_training_env  # noqa: E402
-from foottof.envs.anymal_tof import SEEN_KEY  # noqa: E402
+from foottof.envs import VmapEnv  # noqa: E402
+from foottof.envs.anymal_tof import SEEN_KEY, AnymalToFEnv  # noqa: E402
 from foottof.envs.observations import (  # noqa: E402
     ACTOR_SCAN_ROWS,
     ACTOR_TERRAIN_INPUTS,
@@ -38,28 +40,46 @@ OWN = 181  # the ToF student's inputs (4 sensors x 16 zones)
 CONTACT = slice(181 + 36, 181 + 40)  # the critic's foot contacts (after its clean obs, patches)
 
 
+class _Unmasked(AnymalToFEnv):
+    """The seen env whose terrain heights are true everywhere (a plain teacher's inputs), the
+    seen flags still after them."""
+
+    def _actor_terrain(self, seen, fk, patches, scan, base_pos, base_quat):
+        out = super()._actor_terrain(seen, fk, patches, scan, base_pos, base_quat)
+        true = jp.concatenate([patches, scan[: ACTOR_SCAN_ROWS * 9]])
+        return jp.concatenate([true, out[ACTOR_TERRAIN_INPUTS:]])
+
+
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("run", help="a seen teacher's run or policy folder")
     ap.add_argument("--envs", type=int, default=256)
     ap.add_argument("--steps", type=int, default=300)
     ap.add_argument("--seed", type=int, default=7)
+    ap.add_argument("--plain", action="store_true", help="RUN is a plain teacher (actor_terrain)")
+    ap.add_argument("--max-level", type=int, default=None, help="levels ~ U{0..this} (default 2)")
     a = ap.parse_args()
     cfg = teacher_seen_cpu.get_config()
     with cfg.unlocked():
         cfg.ppo.num_envs = a.envs
-    env = make_training_env(cfg)
-    inner = env.env if hasattr(env, "env") else env
-    grid_spec = inner.seen_grid
+        if a.max_level is not None:
+            cfg.terrain.init_level_max = a.max_level
+    single = (_Unmasked if a.plain else AnymalToFEnv)(cfg, source=cfg.env.source)
+    env, grid_spec = VmapEnv(single), single.seen_grid
+    n_in = OWN + ACTOR_TERRAIN_INPUTS * (1 if a.plain else 2)  # what the policy reads
+
+    def view(obs):
+        return dict(obs, state=obs["state"][:, :n_in])
+
     state = jax.jit(env.reset)(jax.random.split(jax.random.PRNGKey(a.seed), a.envs))
     nets = net.make_networks(env.action_size, cfg.network)
-    params = jax.jit(nets.init_params)(jax.random.PRNGKey(0), state.obs)
-    norm = jax.jit(nets.init_normalizer)(state.obs)
+    params = jax.jit(nets.init_params)(jax.random.PRNGKey(0), view(state.obs))
+    norm = jax.jit(nets.init_normalizer)(view(state.obs))
     params, norm = ckpt.load_params_and_normalizer(a.run, params, norm, grow=False)
 
     @jax.jit
     def one(state, carry, reset):
-        carry, means, *_ = nets.step(params, norm, carry, state.obs, reset)
+        carry, means, *_ = nets.step(params, norm, carry, view(state.obs), reset)
         nxt = env.step(state, means)
         feet = kinematics.world_foot_kinematics(nxt.pipeline_state.qpos).foot_pos  # (N, 4, 3)
         origin, grid = state.info[SEEN_KEY]  # before this step's rays

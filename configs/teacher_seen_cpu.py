@@ -6,7 +6,7 @@ terrain cell this episode, else flat ground at the nominal stance, with a seen f
 (306 inputs). The belief student of policies/student recalls 10 cm ahead of its feet at
 R^2 0.05 (scripts/belief_r2.py): the plain teacher acts on ground no ToF has looked at; this one
 has to look (swing a foot over the ground) before it can know. It starts from the plain teacher
-(policies/teacher, 43.4M env steps; the flags' weights start at zero). Issue "A privileged
+(policies/teacher; this run grew from its 2120 = 43.4M env steps; the flags start at zero). Issue "A privileged
 teacher and its distillation"; results: docs/campaign.md.
 """
 

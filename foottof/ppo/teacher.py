@@ -48,19 +48,12 @@ def teacher_network_cfg(path: str, default):
     student's ``default`` where it has none, without the student's belief decoder."""
     import ml_collections
 
-    from foottof.ppo import run_dir as run_dirs
-
     out = ml_collections.ConfigDict(dict(default))
     if "reconstruct" in out:
         out.reconstruct = (
             0  # the student's belief decoder (network.reconstruct) is not the teacher's
         )
-    config = run_dirs.run_config_path(path)
-    saved = None
-    if config is not None:
-        with open(config) as f:
-            saved = json.load(f).get("network")
-    for k, v in (saved or {}).items():
+    for k, v in (_saved_run_config(path).get("network") or {}).items():
         if k in out:
             out[k] = tuple(v) if isinstance(v, list) else v
     return out
@@ -68,14 +61,19 @@ def teacher_network_cfg(path: str, default):
 
 def teacher_sees_only_seen(path: str) -> bool:
     """The teacher's env.actor_terrain_seen, from its run config (False where it has none)."""
+    env = _saved_run_config(path).get("env", {})
+    return bool(read_added(env, "env.actor_terrain_seen"))
+
+
+def _saved_run_config(path: str) -> dict:
+    """The run config (config.json beside or above ``path``) as a dict; {} where it has none."""
     from foottof.ppo import run_dir as run_dirs
 
     config = run_dirs.run_config_path(path)
     if config is None:
-        return False
+        return {}
     with open(config) as f:
-        env = json.load(f).get("env", {})
-    return bool(read_added(env, "env.actor_terrain_seen"))
+        return json.load(f)
 
 
 def check_teacher_path(path: str) -> None:

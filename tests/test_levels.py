@@ -189,6 +189,16 @@ def test_scan_sightings_on_hand_made_points():
     assert see([[0.06, 0.05]], [-0.5]) == (True, True)  # 7.8 cm away (hand-computed)
     steps = scan_sightings((0.0, 0.0), 0.0, np.zeros((5, 3, 2)), np.full((5, 3), -1.0))
     assert steps[0].shape == (5, 1) and steps[1].all()  # leading axes (steps) are kept
+    # a seen teacher (env.actor_terrain_seen) read only its flagged points: an unflagged near
+    # point in the gap was the flat fill to it, so it neither looked there nor saw the gap
+    pts, hs = np.array([[0.05, 0.0], [0.0, 0.05]]), np.array([-0.5, 0.0])
+    assert scan_sightings((0.0, 0.0), 0.0, pts, hs, np.array([False, False]))[0][0] == False  # noqa: E712
+    assert [
+        bool(x[0]) for x in scan_sightings((0.0, 0.0), 0.0, pts, hs, np.array([False, True]))
+    ] == [True, False]
+    assert [
+        bool(x[0]) for x in scan_sightings((0.0, 0.0), 0.0, pts, hs, np.array([True, False]))
+    ] == [True, True]
 
 
 def test_world_scan_points_are_where_the_teacher_reads():

@@ -112,21 +112,26 @@ def sightings(spot_xy, top_z, origins, dirs, t_hit, max_range_m: float):
     return looked.any(axis=-1), gap.any(axis=-1)
 
 
-def scan_sightings(spot_xy, top_z, points_xy, heights):
+def scan_sightings(spot_xy, top_z, points_xy, heights, seen=None):
     """Which of a teacher's terrain inputs (env.actor_terrain: foot patches and base scan) looked
     at a spot and saw a gap there: a sample point looked when it lay within SIGHT_RADIUS_M of
     ``spot_xy``, and saw a gap when the true height there lay more than SIGHT_BEYOND_M below the
-    stone tops ``top_z`` (the rays' rule of :func:`sightings`, for vertical probes).
+    stone tops ``top_z`` (the rays' rule of :func:`sightings`, for vertical probes). For a seen
+    teacher (env.actor_terrain_seen) only the points whose ``seen`` flag is set count: the others
+    read the flat fill, not the terrain.
 
     Args:
       spot_xy: (2,) the spot [m]; top_z: the stone-top height around it [m].
       points_xy: (..., P, 2) sample points [m]; heights: (..., P) terrain heights there [m].
+      seen: None (every point is read) or (..., P) bool, the teacher's seen flags.
 
     Returns:
       (looked, gap): (..., 1) bool, shaped as one sensor for :func:`sighting_summary`.
     """
     p = np.asarray(points_xy, np.float64)
     near = np.linalg.norm(p - np.asarray(spot_xy, np.float64), axis=-1) < SIGHT_RADIUS_M
+    if seen is not None:
+        near = near & np.asarray(seen, bool)
     low = np.asarray(heights, np.float64) < top_z - SIGHT_BEYOND_M
     return near.any(axis=-1)[..., None], (near & low).any(axis=-1)[..., None]
 
@@ -212,11 +217,13 @@ def run(
     swing, teacher-input look lead, teacher-input gap lead) row per foot_stuck episode
     (:func:`sighting_summary`; the own-sensor lead from the stuck foot's sensor alone; the
     teacher-input leads from the env.actor_terrain sample points, :func:`scan_sightings`, whether
-    or not the policy reads them), else None."""
+    or not the policy reads them; for a seen teacher, env.actor_terrain_seen, only the points it
+    read as seen), else None."""
     import jax
     import jax.numpy as jp
 
     from foottof.envs import observations as obs_lib
+    from foottof.envs.anymal_tof import SEEN_KEY
     from foottof.envs.stuck_probe import foot_gap_depth
     from foottof.eval.harness import make_eval_env_and_policy
     from foottof.robot.kinematics import world_foot_kinematics
@@ -237,6 +244,7 @@ def run(
     step = jax.vmap(env.step)
 
     sites = np.asarray(env.sensing.feet, np.int32)  # the foot of each sensor
+    seen_teacher = bool(env.spec.actor_terrain_seen)  # its inputs read terrain only where seen
 
     def feet(qpos):  # (4, 3) foot centres and (4,) depth below the terrain around, beside a gap
         fk = world_foot_kinematics(qpos[:19], env.shank_scale)
@@ -266,6 +274,9 @@ def run(
             rec = (s2.done, m["episode/success"], m["episode/failed"], m["episode/foot_stuck"])
             rec += (s.pipeline_state.qpos[:, 2], m["episode/progress"], s.info["task"].col)
             rec += jax.vmap(feet)(s.pipeline_state.qpos)  # before the step that ends it
+            if sight and seen_teacher:  # static: the flags the seen teacher read at this step
+                origin, grid = s.info[SEEN_KEY]
+                rec += (jax.vmap(env.seen_grid.lookup)(origin, grid, rec[-2]),)
             return (s2, lstm, s2.done > 0.5), rec
 
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
@@ -286,7 +297,8 @@ def run(
     gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
     rows = None
     if sight:
-        origins, dirs, t_hit, scan_xy, scan_h = rays
+        origins, dirs, t_hit, scan_xy, scan_h, *flags = rays
+        scan_seen = flags[0] if flags else None
         rows = []
         for i in np.nonzero(is_stuck)[0]:
             f = foot[i]
@@ -299,7 +311,13 @@ def run(
             )
             own = np.nonzero(sites == f)[0]  # the stuck foot's own sensor (if it has one)
             own_lead = sighting_summary(foot_pos[:, i, f, 2], top, t[i], looked, seen[:, own])[1]
-            s_looked, s_gap = scan_sightings(xy[i], top, scan_xy[:, i], scan_h[:, i])
+            s_looked, s_gap = scan_sightings(
+                xy[i],
+                top,
+                scan_xy[:, i],
+                scan_h[:, i],
+                None if scan_seen is None else scan_seen[:, i],
+            )
             scan_gap, scan_look = sighting_summary(
                 foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap
             )[1:3]

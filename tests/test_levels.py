@@ -192,7 +192,7 @@ def test_scan_sightings_on_hand_made_points():
     # a seen teacher (env.actor_terrain_seen) read only its flagged points: an unflagged near
     # point in the gap was the flat fill to it, so it neither looked there nor saw the gap
     pts, hs = np.array([[0.05, 0.0], [0.0, 0.05]]), np.array([-0.5, 0.0])
-    assert scan_sightings((0.0, 0.0), 0.0, pts, hs, np.array([False, False]))[0][0] == False  # noqa: E712
+    assert not scan_sightings((0.0, 0.0), 0.0, pts, hs, np.array([False, False]))[0][0]
     assert [
         bool(x[0]) for x in scan_sightings((0.0, 0.0), 0.0, pts, hs, np.array([False, True]))
     ] == [True, False]

@@ -276,7 +276,8 @@ def run(
             rec += jax.vmap(feet)(s.pipeline_state.qpos)  # before the step that ends it
             if sight and seen_teacher:  # static: the flags the seen teacher read at this step
                 origin, grid = s.info[SEEN_KEY]
-                rec += (jax.vmap(env.seen_grid.lookup)(origin, grid, rec[-2]),)
+                pts = rec[-2]  # feet()'s teacher sample points (E, 153, 2), before their heights
+                rec += (jax.vmap(env.seen_grid.lookup)(origin, grid, pts),)
             return (s2, lstm, s2.done > 0.5), rec
 
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))

@@ -1,4 +1,5 @@
-"""PPO fine-tuning of the distilled ToF student (configs/distill_cpu.py) on the arrive task.
+"""PPO fine-tuning of the distilled ToF student (policies/student: configs/distill_seen_cpu.py) on
+the arrive task.
 
 configs/stage1_arrive_cpu.py started from the student (params, normalizer and the teacher's
 critic it carries), with the guidance bias off from the first iteration: the student has learned

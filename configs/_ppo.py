@@ -57,6 +57,8 @@ def get_train_section() -> ml_collections.ConfigDict:
     c.checkpoint_env_state = True  # save env state + LSTM carries: resume is bit-exact
     c.tensorboard = True  # write TensorBoard event files (tensorboardX) next to metrics.csv
     c.teacher = ""  # a run or policy folder: distil it into this run's policy (DAgger), not PPO
+    # resume a distillation run whose train.teacher now holds another checkpoint (teacher.json)
+    c.teacher_change_ok = False
     # distillation diagnostic: the student also reads the first N of the teacher's terrain inputs
     # (36: the true foot patches; 153: all), to measure which of them the imitation gap is over
     c.student_privileged_inputs = 0

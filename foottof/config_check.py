@@ -309,6 +309,7 @@ RULES = {
     "train.log_every": _int(1),
     "train.init_from": _path,
     "train.teacher": _path,
+    "train.teacher_change_ok": _bool,
     "train.student_privileged_inputs": _int(0, 153),  # observations.ACTOR_TERRAIN_INPUTS
     # eval
     "eval.episodes": _int(1),

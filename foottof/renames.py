@@ -40,6 +40,7 @@ ADDED_FIELDS = {
     "reward.overall_scale": 1.0,  # every reward term as scaled
     "train.teacher": "",  # PPO, no distillation
     "train.student_privileged_inputs": 0,  # the student reads its sensors only
+    "train.teacher_change_ok": False,  # a resumed student keeps the teacher it started with
     "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)
     "env.actor_terrain_seen": False,  # a teacher's terrain inputs are true everywhere
     "env.critic_height_scan": False,  # off: the critic reads no base-centred height scan

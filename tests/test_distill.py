@@ -226,3 +226,35 @@ def test_belief_decoder_learns_the_privileged_input_the_student_remembers(teache
     )
     assert tree_equal(params["params"]["decoder"], s0.params["params"]["decoder"])
     assert tree_equal(params["params"]["actor"], tstate.params["params"]["actor"])
+
+
+def test_resumed_student_refuses_a_teacher_that_trained_on(tmp_path):
+    """teacher.json pins the teacher of a distillation run: a resume whose train.teacher folder
+    now holds a later checkpoint is one clear error; the pinned checkpoint, or
+    train.teacher_change_ok, goes on (the change is recorded)."""
+    tenv = toy_envs.make_memory_env(EPISODE, teacher=True)
+    t_dir, s_dir = str(tmp_path / "t"), str(tmp_path / "s")
+    runner.run(tiny_cfg(num_iterations=1), tenv, t_dir)
+
+    def fp(path):
+        _, params, norm = teacher.load_teacher(path, tenv, tiny_cfg().network)
+        return teacher.teacher_fingerprint(params, norm)
+
+    first = fp(t_dir)
+    assert fp(t_dir + "/checkpoints/1") == first  # a step folder reads the same checkpoint
+    rec = teacher.check_teacher_record(s_dir, t_dir, first, resume=False)
+    assert rec == {"teacher": t_dir, "step": 1, "fingerprint": first, "from_iteration": 0}
+    assert json.loads((tmp_path / "s" / "teacher.json").read_text()) == rec
+    assert teacher.check_teacher_record(s_dir, t_dir, first, resume=True) == rec
+
+    runner.run(tiny_cfg(num_iterations=2), tenv, t_dir, resume=True)  # the teacher trains on
+    later = fp(t_dir)
+    assert later != first
+    with pytest.raises(ValueError, match=r"now checkpoint 2 .* distilled from .* checkpoint 1"):
+        teacher.check_teacher_record(s_dir, t_dir, later, resume=True)
+    pinned = t_dir + "/checkpoints/1"
+    assert teacher.check_teacher_record(s_dir, pinned, fp(pinned), resume=True) == rec
+    moved = teacher.check_teacher_record(s_dir, t_dir, later, resume=True, change_ok=True)
+    assert (moved["step"], moved["fingerprint"]) == (2, later)
+    assert moved["previous"][0]["fingerprint"] == first
+    assert json.loads((tmp_path / "s" / "teacher.json").read_text()) == moved

@@ -19,7 +19,7 @@ from foottof.ppo.integrity import INTEGRITY_FILE, integrity_problem, write_integ
 from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 from foottof.ppo.runner import trim_metrics
 
-RUN_FILES = ("config.json", "config.yaml", "metrics.csv")
+RUN_FILES = ("config.json", "config.yaml", "metrics.csv", "teacher.json")  # those the run has
 DEFAULT_MAX_MB = 20.0  # the repo's limit for a shipped policy
 
 

@@ -322,6 +322,33 @@ class Checkpointer:
         self._manager.close()
 
 
+def checkpoint_location(path: str) -> tuple[str, int]:
+    """(checkpoints directory, step) that :func:`load_params_and_normalizer` reads for ``path``:
+    a run or policy folder (its newest step), its checkpoints/ folder, or one step's folder.
+
+    Raises:
+      FileNotFoundError: no checkpoint directory at ``path``, or no checkpoint in it.
+    """
+    path = os.path.abspath(path)
+    step = None
+    if os.path.isdir(os.path.join(path, CHECKPOINT_SUBDIR)):
+        directory = os.path.join(path, CHECKPOINT_SUBDIR)
+    elif os.path.basename(path).isdigit() and os.path.isdir(path):
+        directory, step = os.path.dirname(path), int(os.path.basename(path))
+    else:
+        directory = path
+    if not os.path.isdir(directory):
+        raise FileNotFoundError(f"init_from: no checkpoint directory at {path}")
+    manager = ocp.CheckpointManager(directory, options=ocp.CheckpointManagerOptions(create=False))
+    try:
+        step = manager.latest_step() if step is None else step
+        if step is None or step not in manager.all_steps():
+            raise FileNotFoundError(f"init_from: no checkpoint found in {directory}")
+    finally:
+        manager.close()
+    return directory, int(step)
+
+
 def load_params_and_normalizer(
     path: str, params: Any, normalizer: Any, grow: bool = True, grow_actor: bool = False
 ) -> tuple[Any, Any]:
@@ -344,21 +371,9 @@ def load_params_and_normalizer(
       and cause) if it cannot be read completely; CheckpointMismatch (a ValueError naming the
       leaf and both shapes) if the saved network does not fit this model.
     """
-    path = os.path.abspath(path)
-    step = None
-    if os.path.isdir(os.path.join(path, CHECKPOINT_SUBDIR)):
-        directory = os.path.join(path, CHECKPOINT_SUBDIR)
-    elif os.path.basename(path).isdigit() and os.path.isdir(path):
-        directory, step = os.path.dirname(path), int(os.path.basename(path))
-    else:
-        directory = path
-    if not os.path.isdir(directory):
-        raise FileNotFoundError(f"init_from: no checkpoint directory at {path}")
+    directory, step = checkpoint_location(path)
     manager = ocp.CheckpointManager(directory, options=ocp.CheckpointManagerOptions(create=False))
     try:
-        step = manager.latest_step() if step is None else step
-        if step is None or step not in manager.all_steps():
-            raise FileNotFoundError(f"init_from: no checkpoint found in {directory}")
         step_dir = os.path.join(directory, str(step))
         problem = integrity_problem(step_dir)
         if problem:

@@ -5,11 +5,13 @@ when ``train.teacher`` is set). The algorithm itself (TeacherEnv, the loss) is f
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 
 import jax
 import jax.numpy as jp
+import numpy as np
 
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import networks as net
@@ -74,6 +76,69 @@ def _saved_run_config(path: str) -> dict:
         return {}
     with open(config) as f:
         return json.load(f)
+
+
+TEACHER_RECORD = "teacher.json"  # in a distillation run folder: which teacher it learns from
+
+
+def teacher_fingerprint(params, normalizer) -> str:
+    """A short hash of the teacher's params and normalizer (every leaf's dtype, shape, bytes):
+    equal for the same checkpoint wherever it is copied, different once the teacher trained on."""
+    h = hashlib.sha256()
+    for leaf in jax.tree.leaves((params, normalizer)):
+        a = np.asarray(leaf)
+        h.update(f"{a.dtype}{a.shape}".encode())
+        h.update(np.ascontiguousarray(a).tobytes())
+    return h.hexdigest()[:16]
+
+
+def check_teacher_record(
+    run_dir: str, path: str, fingerprint: str, resume: bool, change_ok: bool = False
+) -> dict:
+    """Records in ``run_dir``/teacher.json the teacher a distillation run learns from (a new run),
+    or checks that a resumed run still reads the same one: ``train.teacher`` names a folder, and
+    a shipped teacher folder may since hold a later checkpoint. Returns the record written or
+    found. A run saved before the record existed gets one (one line says so).
+
+    Raises:
+      ValueError: one message naming both teachers (path, step, fingerprint) and the two ways on,
+        when a resumed run's teacher differs from its record and ``change_ok`` is False.
+    """
+    from foottof.ppo import run_dir as run_dirs
+
+    _, step = ckpt.checkpoint_location(path)
+    now = {"teacher": path, "step": step, "fingerprint": fingerprint}
+    file = os.path.join(run_dir, TEACHER_RECORD)
+    old = None
+    if resume and os.path.exists(file):
+        with open(file) as f:
+            old = json.load(f)
+        if old.get("fingerprint") == fingerprint:
+            return old
+        was = f"{old.get('teacher')!r} at checkpoint {old.get('step')} ({old.get('fingerprint')})"
+        if not change_ok:
+            raise ValueError(
+                f"train.teacher={path!r} is now checkpoint {step} ({fingerprint}), but this run "
+                f"was distilled from {was} ({file}). Point train.teacher at that checkpoint "
+                f"(e.g. --config.train.teacher=PATH/checkpoints/{old.get('step')}), or pass "
+                f"--config.train.teacher_change_ok=True to go on with the new teacher"
+            )
+        print(f"[teacher] the teacher changes: {was} -> {path!r} at checkpoint {step}")
+        now["previous"] = list(old.get("previous", [])) + [
+            {k: old.get(k) for k in ("teacher", "step", "fingerprint", "from_iteration")}
+        ]
+    elif resume:
+        print(f"[teacher] {file} is missing (a run from before it existed): recording {path!r}")
+    if not resume and run_dirs.latest_checkpoint(run_dir) is not None:
+        return now  # the runner refuses a new run in a folder with checkpoints: keep its record
+    now["from_iteration"] = run_dirs.latest_checkpoint(run_dir) if resume else 0
+    if jax.process_index() == 0:
+        os.makedirs(run_dir, exist_ok=True)
+        tmp = file + ".tmp"
+        with open(tmp, "w") as f:
+            json.dump(now, f, indent=1)
+        os.replace(tmp, file)
+    return now
 
 
 def check_teacher_path(path: str) -> None:

@@ -104,12 +104,12 @@ def check_teacher_record(
       ValueError: one message naming both teachers (path, step, fingerprint) and the two ways on,
         when a resumed run's teacher differs from its record and ``change_ok`` is False.
     """
+    from foottof.eval.results import write_atomic
     from foottof.ppo import run_dir as run_dirs
 
     _, step = ckpt.checkpoint_location(path)
     now = {"teacher": path, "step": step, "fingerprint": fingerprint}
     file = os.path.join(run_dir, TEACHER_RECORD)
-    old = None
     if resume and os.path.exists(file):
         with open(file) as f:
             old = json.load(f)
@@ -129,15 +129,12 @@ def check_teacher_record(
         ]
     elif resume:
         print(f"[teacher] {file} is missing (a run from before it existed): recording {path!r}")
-    if not resume and run_dirs.latest_checkpoint(run_dir) is not None:
+    latest = run_dirs.latest_checkpoint(run_dir)
+    if not resume and latest is not None:
         return now  # the runner refuses a new run in a folder with checkpoints: keep its record
-    now["from_iteration"] = run_dirs.latest_checkpoint(run_dir) if resume else 0
+    now["from_iteration"] = latest if resume else 0
     if jax.process_index() == 0:
-        os.makedirs(run_dir, exist_ok=True)
-        tmp = file + ".tmp"
-        with open(tmp, "w") as f:
-            json.dump(now, f, indent=1)
-        os.replace(tmp, file)
+        write_atomic({file: json.dumps(now, indent=1).encode()})
     return now
 
 

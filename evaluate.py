@@ -139,7 +139,9 @@ def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
     from foottof.ppo.integrity import policy_digest
 
     policy = policy_digest(ckpt) if ckpt else "untrained"
-    return CellStore(out, cell_identity(policy, draws, bool(cfg.eval.deterministic)))
+    deterministic = bool(cfg.eval.deterministic)
+    cap = None if deterministic else float(cfg.network.max_noise_std)
+    return CellStore(out, cell_identity(policy, draws, deterministic, cap))
 
 
 def main(argv):
@@ -174,8 +176,12 @@ def main(argv):
         if _EXPORT.value:
             _check_export_path(_EXPORT.value)
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
-        cfg = with_run_network(cfg, ckpt)
-        acts = "mean actions" if cfg.eval.deterministic else "actions sampled at the action std"
+        overrides = config_flags.get_override_values(flags.FLAGS["config"])
+        cfg = with_run_network(cfg, ckpt, overrides)
+        acts = "mean actions"
+        if not cfg.eval.deterministic:
+            cap = float(cfg.network.max_noise_std)
+            acts = "actions sampled at the action std" + (f", capped at {cap:g}" if cap > 0 else "")
         print(f"[evaluate] policy: {ckpt or 'untrained (fresh init)'} ({acts})")
         key = jax.random.PRNGKey(int(cfg.eval.seed))
         if _EXPORT.value:

@@ -584,6 +584,21 @@ def _cell(level, n=3):
     return row, outcomes
 
 
+def test_a_sampled_cell_is_reused_only_at_the_same_action_std_cap(tmp_path):
+    draws = {"seed": 1, "num_envs": 3, "episodes": 3, "fingerprint": "abc"}
+    cells.CellStore(str(tmp_path), cells.cell_identity("p1", draws, False, 0.4)).save(*_cell(0.1))
+
+    def load(deterministic, cap):
+        store = cells.CellStore(str(tmp_path), cells.cell_identity("p1", draws, deterministic, cap))
+        return store.load("tof", "joint_offset", 0.1)
+
+    assert load(False, 0.4) is not None
+    assert load(False, 0.25) is None  # sampled at another std
+    assert load(True, 0.4) is None  # mean actions
+    # Mean actions do not depend on the cap: their identity is the same at any cap.
+    assert cells.cell_identity("p1", draws, True, 0.4) == cells.cell_identity("p1", draws, True)
+
+
 def test_cell_store_reuses_only_an_intact_cell_of_the_same_identity(tmp_path):
     draws = {"seed": 1, "num_envs": 3, "episodes": 3, "fingerprint": "abc"}
     store = cells.CellStore(str(tmp_path), cells.cell_identity("p1", draws, True))

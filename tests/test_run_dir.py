@@ -1,5 +1,6 @@
 """foottof.ppo.run_dir: a new folder per train.py run, the latest linked; errors name CLI flags."""
 
+import json
 import os
 
 import pytest
@@ -87,3 +88,47 @@ def test_latest_checkpoint_is_the_newest_complete_one(tmp_path):
     (tmp_path / "checkpoints" / "14.orbax-checkpoint-tmp-1765000000").mkdir()
     (tmp_path / "checkpoints" / "notes.txt").write_text("")
     assert rd.latest_checkpoint(str(tmp_path)) == 12
+
+
+def _run_with_config(tmp_path, network: dict, env: dict) -> str:
+    run = tmp_path / "run"
+    (run / "checkpoints" / "10").mkdir(parents=True)
+    (run / "config.json").write_text(json.dumps({"network": network, "env": env}))
+    return str(run / "checkpoints" / "10")
+
+
+def test_a_command_line_action_std_cap_outlives_the_runs_network(tmp_path):
+    """evaluate.py --config.network.max_noise_std=X with sampled actions: the policy's network
+    comes from its run, but the cap on the std its actions are sampled at is the user's (it shapes
+    no parameter); any other command-line network or input field must equal the run's."""
+    import jax.numpy as jp
+
+    from configs import teacher_cpu
+    from foottof.ppo.networks import make_networks
+
+    ckpt = _run_with_config(
+        tmp_path,
+        {"max_noise_std": 0.4, "lstm_hidden_size": 32, "actor_hidden": [16, 8]},
+        {"actor_terrain": True, "critic_height_scan": True},
+    )
+    cfg = teacher_cpu.get_config()
+    cfg.network.max_noise_std = 0.25
+    kept = rd.with_run_network(cfg, ckpt, {"network.max_noise_std"})
+    assert kept.network.max_noise_std == 0.25
+    assert kept.network.lstm_hidden_size == 32 and kept.network.actor_hidden == (16, 8)
+    assert rd.with_run_network(cfg, ckpt).network.max_noise_std == 0.4  # not on the command line
+    assert cfg.network.max_noise_std == 0.25  # the caller's config is not changed
+    # The cap reaches the sampled actions: a learned std of 1 is sampled at 0.25.
+    params = {"params": {"log_std": jp.zeros(12)}}
+    std = jp.exp(make_networks(12, kept.network).action_log_std(params))
+    assert float(std.max()) == pytest.approx(0.25)
+    cfg.network.lstm_hidden_size = 64  # differs from the run's 32
+    with pytest.raises(ValueError, match=r"network.lstm_hidden_size=64 on the command line.*32"):
+        rd.with_run_network(cfg, ckpt, {"network.lstm_hidden_size"})
+    cfg.network.lstm_hidden_size = 32  # equal to the run's: allowed
+    assert (
+        rd.with_run_network(cfg, ckpt, {"network.lstm_hidden_size"}).network.lstm_hidden_size == 32
+    )
+    cfg.env.actor_terrain = False  # the run's actor reads the terrain
+    with pytest.raises(ValueError, match=r"env.actor_terrain=False on the command line"):
+        rd.with_run_network(cfg, ckpt, {"env.actor_terrain"})

@@ -8,7 +8,8 @@ matches instead of running them, and removes the cell files once the results fil
 
 A cell is reused only when everything that decides its outcomes is equal: the policy files
 (integrity.policy_digest), the episode draws (results.episode_draws: seed, batch size, episode
-count, config fingerprint) and the action mode (mean or sampled). Anything else (another
+count, config fingerprint) and the action mode (mean, or sampled at a std capped at
+network.max_noise_std). Anything else (another
 checkpoint, seed, episode count or config value) runs the cell again and replaces the file.
 """
 
@@ -26,15 +27,22 @@ CELLS_SUBDIR = "cells"
 CELL_SCHEMA_VERSION = 1
 
 
-def cell_identity(policy: str, draws: dict, deterministic: bool) -> dict:
+def cell_identity(
+    policy: str, draws: dict, deterministic: bool, max_noise_std: float | None = None
+) -> dict:
     """What must be equal for a stored cell to stand for a new run of it.
 
     Args:
       policy: integrity.policy_digest of the evaluated checkpoint, or "untrained".
       draws: results.episode_draws of the config.
       deterministic: eval.deterministic (mean actions).
+      max_noise_std: with sampled actions, network.max_noise_std (the cap on the std they are
+        sampled at; evaluate.py may set it apart from the run's); ignored for mean actions.
     """
-    return {"policy": str(policy), "draws": dict(draws), "deterministic": bool(deterministic)}
+    identity = {"policy": str(policy), "draws": dict(draws), "deterministic": bool(deterministic)}
+    if not deterministic:
+        identity["max_noise_std"] = None if max_noise_std is None else float(max_noise_std)
+    return identity
 
 
 def cell_path(out_dir: str, source: str, perturbation: str, level: float) -> str:

@@ -170,9 +170,23 @@ def run_config_path(checkpoint: str) -> str | None:
 RUN_INPUT_FIELDS = ("critic_height_scan", "actor_terrain", "actor_terrain_seen")
 
 
-def with_run_network(cfg, checkpoint: str | None):
+# Network fields that do not shape the parameters: a command-line value may differ from the run's.
+# network.max_noise_std caps the std that actions are sampled at (eval.deterministic=False).
+RUN_NETWORK_FREE_FIELDS = ("max_noise_std",)
+
+
+def with_run_network(cfg, checkpoint: str | None, overrides=()):
     """`cfg` (a ConfigDict) with c.network, and the env fields that shape the network's inputs
-    (RUN_INPUT_FIELDS), from the checkpoint's run config (if it has one)."""
+    (RUN_INPUT_FIELDS), from the checkpoint's run config (if it has one).
+
+    Args:
+      overrides: the dotted names the user set on the command line (e.g. the keys of
+        ml_collections' ``config_flags.get_override_values``). Such a value of a field in
+        RUN_NETWORK_FREE_FIELDS is kept; one of any other field the run sets must equal the run's.
+
+    Raises:
+      ValueError: a command-line value of a network or input field differs from the run's.
+    """
     path = run_config_path(checkpoint) if checkpoint else None
     if path is None:
         return cfg
@@ -180,11 +194,28 @@ def with_run_network(cfg, checkpoint: str | None):
         saved = json.load(f)
     if "network" not in saved:
         return cfg
+    overrides = set(overrides)
     c = copy.deepcopy(cfg)
+    runs = {
+        f"network.{k}": (tuple(v) if isinstance(v, list) else v)
+        for k, v in saved["network"].items()
+    }
+    runs.update(
+        {f"env.{k}": bool(read_added(saved.get("env", {}), f"env.{k}")) for k in RUN_INPUT_FIELDS}
+    )
     with c.unlocked():
-        for k, v in saved["network"].items():
-            if k in c.network:
-                c.network[k] = tuple(v) if isinstance(v, list) else v
-        for k in RUN_INPUT_FIELDS:
-            c.env[k] = bool(read_added(saved.get("env", {}), f"env.{k}"))
+        for name, value in runs.items():
+            section, key = name.split(".")
+            if key not in c[section]:
+                continue
+            if name in overrides:
+                if section == "network" and key in RUN_NETWORK_FREE_FIELDS:
+                    continue
+                if c[section][key] != value:
+                    raise ValueError(
+                        f"{name}={c[section][key]!r} on the command line, but the policy's run "
+                        f"({path}) has {value!r}: the network comes from its run; of its fields "
+                        f"only {', '.join('network.' + f for f in RUN_NETWORK_FREE_FIELDS)} may differ"
+                    )
+            c[section][key] = value
     return c

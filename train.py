@@ -78,14 +78,7 @@ def main(argv):
         if read_added(t, "train.teacher"):  # distillation: the teacher's env and the student's init
             from foottof.ppo import teacher
 
-            env, init_params = teacher.make_distill_env(cfg)
-            teacher.check_teacher_record(
-                run_dir,
-                str(t.teacher),
-                teacher.teacher_fingerprint(env.teacher_params, env.teacher_normalizer),
-                _RESUME.value,
-                read_added(t, "train.teacher_change_ok"),
-            )
+            env, init_params = teacher.make_distill_env(cfg)  # runner.run records it
         else:
             env = make_training_env(cfg)
         runner.run(

@@ -258,3 +258,32 @@ def test_resumed_student_refuses_a_teacher_that_trained_on(tmp_path):
     assert (moved["step"], moved["fingerprint"]) == (2, later)
     assert moved["previous"][0]["fingerprint"] == first
     assert json.loads((tmp_path / "s" / "teacher.json").read_text()) == moved
+
+
+def test_runner_pins_the_teacher_and_a_failed_new_run_leaves_no_folder(tmp_path):
+    """runner.run itself records teacher.json for a TeacherEnv (train.py and a notebook alike)
+    and refuses a resume that steps with another teacher; a new run that fails before its first
+    checkpoint removes its folder, record and all."""
+    tenv = toy_envs.make_memory_env(EPISODE, teacher=True)
+    t_dir = str(tmp_path / "t")
+    runner.run(tiny_cfg(num_iterations=2), tenv, t_dir)
+    cfg = tiny_cfg(num_iterations=1)
+    cfg.train.teacher = t_dir
+
+    def student_env(path, shift=0.0):
+        nets, params, norm = teacher.load_teacher(path, tenv, cfg.network)
+        return distill.TeacherEnv(tenv, (nets, jax.tree.map(lambda x: x + shift, params), norm), 2)
+
+    link, failed = str(tmp_path / "latest"), str(tmp_path / "failed")
+    with pytest.raises(FileNotFoundError):
+        runner.run(
+            cfg, student_env(t_dir), failed, init_from=str(tmp_path / "no"), latest_link=link
+        )
+    assert not (tmp_path / "failed").exists()
+    s_dir = str(tmp_path / "s")
+    runner.run(cfg, student_env(t_dir), s_dir)
+    rec = json.loads((tmp_path / "s" / "teacher.json").read_text())
+    assert (rec["teacher"], rec["step"], rec["from_iteration"]) == (t_dir, 2, 0)
+    cfg.train.num_iterations = 2
+    with pytest.raises(ValueError, match=r"now checkpoint 2 .* distilled from .* checkpoint 2"):
+        runner.run(cfg, student_env(t_dir, shift=1e-3), s_dir, resume=True)  # other params

@@ -14,9 +14,10 @@ import numpy as np
 
 from foottof import renames
 from foottof.ppo import checkpoint as ckpt
-from foottof.ppo import distributed
+from foottof.ppo import distributed, teacher
 from foottof.ppo import run_dir as run_dirs
 from foottof.ppo import train as train_lib
+from foottof.ppo.distill import TeacherEnv
 
 # Above these sizes on a CPU backend a run is GPU-sized: warn. bench/: 1024 envs run at the same
 # env-steps/s as 256 on 2 cores (configs/stage1_cpu.py uses 512); LSTM 256 is stage1.py's GPU net.
@@ -286,6 +287,8 @@ def run(
         except FileExistsError as e:
             print(f"[runner] WARNING: {e}")
     try:
+        if isinstance(env, TeacherEnv) and renames.read_added(cfg.train, "train.teacher"):
+            teacher.record_teacher(run_dir, cfg, env, resume)  # teacher.json: pins the teacher
         return _run(cfg, env, run_dir, resume, init_from, on_iteration, main, init_params)
     finally:
         if linked and not run_dirs.has_checkpoint(run_dir):

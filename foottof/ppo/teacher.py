@@ -98,7 +98,8 @@ def check_teacher_record(
     """Records in ``run_dir``/teacher.json the teacher a distillation run learns from (a new run),
     or checks that a resumed run still reads the same one: ``train.teacher`` names a folder, and
     a shipped teacher folder may since hold a later checkpoint. Returns the record written or
-    found. A run saved before the record existed gets one (one line says so).
+    found. A run saved before the record existed gets one (one line says so). A ``path`` that is
+    no checkpoint folder (a teacher built in memory, e.g. a notebook's) is recorded with step None.
 
     Raises:
       ValueError: one message naming both teachers (path, step, fingerprint) and the two ways on,
@@ -107,7 +108,7 @@ def check_teacher_record(
     from foottof.eval.results import write_atomic
     from foottof.ppo import run_dir as run_dirs
 
-    _, step = ckpt.checkpoint_location(path)
+    step = ckpt.checkpoint_location(path)[1] if os.path.isdir(path) else None
     now = {"teacher": path, "step": step, "fingerprint": fingerprint}
     file = os.path.join(run_dir, TEACHER_RECORD)
     if resume and os.path.exists(file):
@@ -136,6 +137,18 @@ def check_teacher_record(
     if jax.process_index() == 0:
         write_atomic({file: json.dumps(now, indent=1).encode()})
     return now
+
+
+def record_teacher(run_dir: str, cfg, env: TeacherEnv, resume: bool) -> dict:
+    """:func:`check_teacher_record` for a distillation run of ``cfg`` (train.teacher,
+    train.teacher_change_ok) on ``env``: the fingerprint of the teacher ``env`` steps with."""
+    return check_teacher_record(
+        run_dir,
+        str(cfg.train.teacher),
+        teacher_fingerprint(env.teacher_params, env.teacher_normalizer),
+        resume,
+        bool(read_added(cfg.train, "train.teacher_change_ok")),
+    )
 
 
 def check_teacher_path(path: str) -> None:

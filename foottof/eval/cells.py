@@ -9,8 +9,8 @@ matches instead of running them, and removes the cell files once the results fil
 A cell is reused only when everything that decides its outcomes is equal: the policy files
 (integrity.policy_digest), the episode draws (results.episode_draws: seed, batch size, episode
 count, config fingerprint) and the action mode (mean, or sampled at a std capped at
-network.max_noise_std). Anything else (another
-checkpoint, seed, episode count or config value) runs the cell again and replaces the file.
+network.max_noise_std). Anything else (another checkpoint, seed, episode count or config value)
+runs the cell again and replaces the file.
 """
 
 from __future__ import annotations

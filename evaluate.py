@@ -139,9 +139,14 @@ def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
     from foottof.ppo.integrity import policy_digest
 
     policy = policy_digest(ckpt) if ckpt else "untrained"
-    deterministic = bool(cfg.eval.deterministic)
-    cap = None if deterministic else float(cfg.network.max_noise_std)
-    return CellStore(out, cell_identity(policy, draws, deterministic, cap))
+    return CellStore(
+        out, cell_identity(policy, draws, bool(cfg.eval.deterministic), _sampling_cap(cfg))
+    )
+
+
+def _sampling_cap(cfg) -> float | None:
+    """network.max_noise_std of sampled actions (0: no cap); None for mean actions."""
+    return None if cfg.eval.deterministic else float(cfg.network.max_noise_std)
 
 
 def main(argv):
@@ -178,10 +183,9 @@ def main(argv):
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
         overrides = config_flags.get_override_values(flags.FLAGS["config"])
         cfg = with_run_network(cfg, ckpt, overrides)
-        acts = "mean actions"
-        if not cfg.eval.deterministic:
-            cap = float(cfg.network.max_noise_std)
-            acts = "actions sampled at the action std" + (f", capped at {cap:g}" if cap > 0 else "")
+        cap = _sampling_cap(cfg)
+        acts = "mean actions" if cap is None else "actions sampled at the action std"
+        acts += f", capped at {cap:g}" if cap else ""
         print(f"[evaluate] policy: {ckpt or 'untrained (fresh init)'} ({acts})")
         key = jax.random.PRNGKey(int(cfg.eval.seed))
         if _EXPORT.value:

@@ -196,16 +196,15 @@ def with_run_network(cfg, checkpoint: str | None, overrides=()):
         return cfg
     overrides = set(overrides)
     c = copy.deepcopy(cfg)
-    runs = {
-        f"network.{k}": (tuple(v) if isinstance(v, list) else v)
-        for k, v in saved["network"].items()
-    }
-    runs.update(
-        {f"env.{k}": bool(read_added(saved.get("env", {}), f"env.{k}")) for k in RUN_INPUT_FIELDS}
-    )
+    runs = [
+        ("network", k, tuple(v) if isinstance(v, list) else v) for k, v in saved["network"].items()
+    ]
+    runs += [
+        ("env", k, bool(read_added(saved.get("env", {}), f"env.{k}"))) for k in RUN_INPUT_FIELDS
+    ]
     with c.unlocked():
-        for name, value in runs.items():
-            section, key = name.split(".")
+        for section, key, value in runs:
+            name = f"{section}.{key}"
             if key not in c[section]:
                 continue
             if name in overrides:

@@ -135,18 +135,13 @@ def _export(cfg, source: str, ckpt, key) -> None:
 def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
     """The finished-cell store of this evaluation (foottof.eval.cells): a rerun of an
     interrupted command loads the cells it already finished."""
+    from foottof.eval import results
     from foottof.eval.cells import CellStore, cell_identity
     from foottof.ppo.integrity import policy_digest
 
     policy = policy_digest(ckpt) if ckpt else "untrained"
-    return CellStore(
-        out, cell_identity(policy, draws, bool(cfg.eval.deterministic), _sampling_cap(cfg))
-    )
-
-
-def _sampling_cap(cfg) -> float | None:
-    """network.max_noise_std of sampled actions (0: no cap); None for mean actions."""
-    return None if cfg.eval.deterministic else float(cfg.network.max_noise_std)
+    cap = results.action_std_cap(cfg)
+    return CellStore(out, cell_identity(policy, draws, bool(cfg.eval.deterministic), cap))
 
 
 def main(argv):
@@ -183,7 +178,7 @@ def main(argv):
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
         overrides = config_flags.get_override_values(flags.FLAGS["config"])
         cfg = with_run_network(cfg, ckpt, overrides)
-        cap = _sampling_cap(cfg)
+        cap = results.action_std_cap(cfg)
         acts = "mean actions" if cap is None else "actions sampled at the action std"
         acts += f", capped at {cap:g}" if cap else ""
         print(f"[evaluate] policy: {ckpt or 'untrained (fresh init)'} ({acts})")

@@ -256,7 +256,8 @@ def test_ensemble_is_recorded_and_captioned():
     assert e["difficulty_fraction"] == 0.125 and e["deterministic"] is True
     assert e["fingerprint"] == results.draws_fingerprint(cfg)
     doc = results.results_document([_row("tof", "odometry", 0.0, 5)], None, 10.0, e)
-    assert doc["schema_version"] == 3 and doc["ensemble"] == e
+    assert doc["schema_version"] == 4 and doc["ensemble"] == e
+    assert e["action_std_cap"] is None  # mean actions use no std
     rows = [_row("tof", "odometry", 0.0, 5, n=200), _row("tof", "odometry", 2.0, 3, n=200)]
     assert results.ensemble_caption(e, rows) == (
         "ensemble: 80 % stepping stones + 20 % gaps at 12.5 % of the stage-1 difficulty range, "
@@ -315,6 +316,53 @@ def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
     rows, _, _ = drawn[-1]
     assert sorted(r["source"] for r in rows) == ["mock_aggre", "tof"]
     assert all("mean_speed_mps" in r for r in rows)
+
+
+def test_sampled_results_record_their_action_std_cap_and_old_files_migrate(tmp_path, monkeypatch):
+    drawn = []
+    monkeypatch.setattr(
+        plots,
+        "robustness_png",
+        lambda rows, caption, left_out: drawn.append((rows, caption, left_out)) or b"png",
+    )
+    cfg = smoke.get_config()
+    mean = results.ensemble_setting(cfg)
+    cfg.eval.deterministic = False
+    cfg.network.max_noise_std = 0.25
+    at_025 = results.ensemble_setting(cfg)
+    cfg.network.max_noise_std = 0.4
+    at_04 = results.ensemble_setting(cfg)
+    assert (mean["action_std_cap"], at_025["action_std_cap"], at_04["action_std_cap"]) == (
+        None,
+        0.25,
+        0.4,
+    )
+    rows = [_row("tof", "odometry", 0.0, 5, n=200)]
+    assert results.ensemble_caption(at_025, rows).endswith(
+        "sampled actions (std capped at 0.25), 200 episodes per cell"
+    )
+    out = str(tmp_path)
+
+    def write(source, ensemble):
+        doc = results.results_document([_row(source, "odometry", 0.0, 4)], None, 10.0, ensemble)
+        results.write_results(out, source, "odometry", doc)
+
+    write("tof", at_025)
+    write("mock_aggre", at_04)  # sampled at another cap: not drawn with the first
+    assert [r["source"] for r in drawn[-1][0]] == ["mock_aggre"]
+    assert drawn[-1][2] == ["results_tof_odometry.json"]
+    # Files written before schema 4: mean actions migrate (no std used); sampled ones, whose
+    # cap was not recorded, are drawn with nothing new.
+    for name, ens in (("tof", mean), ("mock_aggre", at_04)):
+        path = tmp_path / f"results_{name}_odometry.json"
+        old = json.loads(path.read_text())
+        old["schema_version"] = 3
+        old["ensemble"] = {k: v for k, v in ens.items() if k != "action_std_cap"}
+        path.write_text(json.dumps(old))
+    write("mock_ideal", mean)
+    assert sorted(r["source"] for r in drawn[-1][0]) == ["mock_ideal", "tof"]
+    assert drawn[-1][2] == ["results_mock_aggre_odometry.json"]
+    assert results.migrate_ensemble(None) is None
 
 
 def test_robustness_png_with_caption_and_left_out_files():
@@ -481,7 +529,7 @@ def test_end_to_end_writes_outputs(e2e):
     with open(paths["json"]) as f:
         doc = json.load(f)
     assert tuple(doc) == results.TOP_KEYS  # schema: exact key sets
-    assert doc["schema_version"] == 3 and doc["ensemble"] == results.ensemble_setting(cfg)
+    assert doc["schema_version"] == 4 and doc["ensemble"] == results.ensemble_setting(cfg)
     assert len(doc["results"]) == 2
     for r, level in zip(doc["results"], (0.0, 2.0), strict=True):
         assert tuple(r) == results.RESULT_KEYS

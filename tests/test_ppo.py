@@ -413,6 +413,65 @@ def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
     np.testing.assert_allclose(value1, value0, atol=1e-6)
 
 
+def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn(tmp_path, capsys):
+    """A checkpoint whose actor head is (8, 6) resumes into obs_skip heads with an actor head of
+    (16, 12) (input_growth.grow_width): saved blocks as saved, the new units' incoming weights
+    as the fresh model's, zero weights from them (and from the new observation rows) into the
+    saved units and the output, zero Adam moments; the actions are the saved model's, and one
+    iteration later the output layer has learned to read the new units."""
+    env = toy_envs.make_memory_env(privileged=True)
+    cfg = tiny_cfg()
+    cfg.network.actor_hidden = (8, 6)
+    trainer = train_lib.make_train(env, cfg)
+    state, _ = trainer.iteration(trainer.init(jax.random.PRNGKey(0)))
+    saved = jax.device_get(state)
+    checkpointer = ckpt.Checkpointer(str(tmp_path))
+    checkpointer.save(state)
+    wide = tiny_cfg()
+    wide.network.actor_hidden = (16, 12)
+    wide.network.obs_skip = True
+    wide_trainer = train_lib.make_train(env, wide)
+    fresh = jax.device_get(wide_trainer.init(jax.random.PRNGKey(1)))
+    restored, _ = checkpointer.restore(wide_trainer.init(jax.random.PRNGKey(1)))
+    checkpointer.close()
+    restored = jax.device_get(restored)
+    assert "params: inputs grown on 6 leaves" in capsys.readouterr().out  # 3 actor kernels,
+    # 2 actor biases, the critic's dense_0 kernel (obs_skip)
+    old, new, init = (x.params["params"]["actor"] for x in (saved, restored, fresh))
+    h = cfg.network.lstm_hidden_size
+    for layer, (n_in, n_out) in {"dense_0": (h, 8), "dense_1": (8, 6), "out": (6, None)}.items():
+        k_old, k_new, k_init = (np.asarray(x[layer]["kernel"]) for x in (old, new, init))
+        n_out = n_out or k_old.shape[1]
+        np.testing.assert_array_equal(k_new[:n_in, :n_out], k_old)
+        assert not np.any(k_new[n_in:, :n_out])  # nothing new reaches a saved unit
+        np.testing.assert_array_equal(k_new[:, n_out:], k_init[:, n_out:])  # fresh new units
+        np.testing.assert_array_equal(np.asarray(new[layer]["bias"])[:n_out], old[layer]["bias"])
+    assert np.any(np.asarray(new["dense_1"]["kernel"])[:, 6:])  # the new units are not dead
+    for leaf in jax.tree.leaves(restored.opt_state):  # saved moments (equal) or new ones (zero)
+        leaf = np.asarray(leaf)
+        if leaf.ndim == 2 and leaf.shape[1] == 12:  # dense_1's moments: new columns are zero
+            assert not np.any(leaf[:, 6:])
+
+    leaves, treedef = jax.tree.flatten(saved.env_state.obs)
+    keys = jax.random.split(jax.random.PRNGKey(5), len(leaves))
+    obs = jax.tree.unflatten(
+        treedef, [jax.random.normal(k, x.shape) for k, x in zip(keys, leaves, strict=True)]
+    )
+    resets = jp.zeros(saved.prev_done.shape, bool)
+    _, mean0, _, value0 = trainer.networks.step(
+        saved.params, saved.normalizer, saved.carry, obs, resets
+    )
+    _, mean1, _, value1 = wide_trainer.networks.step(
+        restored.params, restored.normalizer, restored.carry, obs, resets
+    )
+    np.testing.assert_allclose(mean1, mean0, atol=1e-6)
+    np.testing.assert_allclose(value1, value0, atol=1e-6)
+
+    after, _ = wide_trainer.iteration(jax.device_put(restored))
+    out_rows = np.asarray(after.params["params"]["actor"]["out"]["kernel"])[6:]
+    assert np.any(out_rows)  # the output reads the new units after one update
+
+
 def test_resume_equals_straight_run(tmp_path, capsys):
     env = MEMORY_ENV
     straight = runner.run(tiny_cfg(num_iterations=4), env, str(tmp_path / "a"))

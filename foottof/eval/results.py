@@ -14,7 +14,8 @@ import numpy as np
 
 from foottof import renames
 
-SCHEMA_VERSION = 3  # 2: adds "ensemble" (difficulty, stone share, actions); 3: mean_speed_mps
+SCHEMA_VERSION = 4  # 2: adds "ensemble" (difficulty, stone share, actions); 3: mean_speed_mps;
+# 4: the ensemble records the action std cap of sampled actions (older files: migrate_ensemble)
 RESULT_KEYS = (  # exact key set (and CSV column order) of one result row
     "source",
     "perturbation",
@@ -34,6 +35,7 @@ ENSEMBLE_KEYS = (  # exact key set of the "ensemble" entry (ensemble_setting)
     "stone_types",
     "gap_types",
     "deterministic",
+    "action_std_cap",  # network.max_noise_std of sampled actions (0: no cap); None: mean actions
     "fingerprint",
 )
 
@@ -112,11 +114,17 @@ def results_document(
     }
 
 
+def action_std_cap(cfg) -> float | None:
+    """The action std cap an evaluation sampled at: network.max_noise_std (0: no cap) when
+    eval.deterministic is False; None for mean actions (no std is used)."""
+    return None if cfg.eval.deterministic else float(cfg.network.max_noise_std)
+
+
 def ensemble_setting(cfg) -> dict:
     """What an evaluation ran on (the results file's "ensemble"): eval.difficulty_fraction,
-    stone_fraction, stone/gap types, deterministic, and draws_fingerprint (equal fingerprints:
-    the same terrain, episode draws and env settings). Only results of equal settings share a
-    figure."""
+    stone_fraction, stone/gap types, deterministic, the action std cap of sampled actions
+    (:func:`action_std_cap`) and draws_fingerprint (equal fingerprints: the same terrain,
+    episode draws and env settings). Only results of equal settings share a figure."""
     e = cfg.eval
     return {
         "difficulty_fraction": float(e.difficulty_fraction),
@@ -124,8 +132,26 @@ def ensemble_setting(cfg) -> dict:
         "stone_types": list(e.stone_types),
         "gap_types": list(e.gap_types),
         "deterministic": bool(e.deterministic),
+        "action_std_cap": action_std_cap(cfg),
         "fingerprint": draws_fingerprint(cfg),
     }
+
+
+def migrate_ensemble(ensemble):
+    """An older results file's "ensemble" in this schema's keys: a file of mean actions written
+    before schema 4 gets "action_std_cap" None (it used no std); one of sampled actions keeps
+    the key missing, since its cap was not recorded (it then matches no new ensemble). Anything
+    that is not a dict is returned as it is."""
+    if not isinstance(ensemble, dict) or "action_std_cap" in ensemble:
+        return ensemble
+    if ensemble.get("deterministic") is not True:
+        return ensemble
+    out = {}
+    for k, v in ensemble.items():
+        if k == "fingerprint":
+            out["action_std_cap"] = None
+        out[k] = v
+    return out
 
 
 def ensemble_caption(ensemble: dict, rows: list[dict], checkpoints: list[str] = ()) -> str:
@@ -136,7 +162,9 @@ def ensemble_caption(ensemble: dict, rows: list[dict], checkpoints: list[str] = 
     stones = round(100 * ensemble["stone_fraction"])
     counts = sorted({int(r["episodes"]) for r in rows})
     per_cell = f"{counts[0]}" if len(counts) == 1 else f"{counts[0]}-{counts[-1]}"
+    cap = ensemble.get("action_std_cap")
     actions = "mean actions" if ensemble["deterministic"] else "sampled actions"
+    actions += f" (std capped at {cap:g})" if cap else ""
     text = (
         f"ensemble: {stones} % stepping stones + {100 - stones} % gaps at "
         f"{100 * ensemble['difficulty_fraction']:g} % of the stage-1 difficulty range, {actions}, "
@@ -335,7 +363,7 @@ def write_results(
             more = [r for r in more if tuple(r) == RESULT_KEYS]
         except (OSError, ValueError, KeyError, TypeError):
             continue  # a foreign or damaged file: not plotted
-        if other.get("ensemble") != doc["ensemble"]:
+        if migrate_ensemble(other.get("ensemble")) != doc["ensemble"]:
             left_out.append(os.path.basename(p))
             continue
         drawn = [r for r in more if (r["source"], r["perturbation"], r["level"]) not in seen]

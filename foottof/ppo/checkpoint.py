@@ -232,7 +232,9 @@ class Checkpointer:
 
         A model whose network reads more inputs than the saved one (input_growth.INPUT_LEAVES,
         e.g. network.obs_skip heads) gets the saved kernels with zero rows for the new inputs, and
-        zero Adam moments for them: it acts as the saved one did.
+        zero Adam moments for them; a wider actor head (network.actor_hidden) gets the saved
+        layers with its new units cut off from the saved ones (input_growth.grow_width): it
+        acts as the saved one did.
 
         Returns:
           (state, restored_rollout): fields of items missing in the checkpoint ('rollout' when
@@ -313,7 +315,7 @@ class Checkpointer:
                 tree = growth.grow_tree(tree, _sub(target, item), grown[item])
                 print(
                     f"[checkpoint] {item}: inputs grown on {len(grown[item])} leaves "
-                    f"(new inputs start with zero weight)"
+                    f"(new inputs and units start with zero weight on the saved ones)"
                 )
             fields.update(tree)
         return target.replace(**fields), "rollout" in items
@@ -411,7 +413,7 @@ def load_params_and_normalizer(
             tree = growth.grow_tree(tree, sub, grown[item])
             print(
                 f"[init_from] {item}: inputs grown on {len(grown[item])} leaves "
-                f"(new inputs start with zero weight)"
+                f"(new inputs and units start with zero weight on the saved ones)"
             )
         out.append(tree[item])
     return out[0], out[1]

@@ -5,6 +5,15 @@ observation beside the LSTM output; on request the actor's, env.actor_terrain), 
 resume from a run without them restores the saved kernels with zero rows for the new inputs, zero
 Adam moments for them and normalizer entries of mean 0 / variance 1: the grown network acts as the
 saved one did. The names below match inside params, the optimizer's moments and the normalizer.
+
+Width growth: the actor head (network.actor_hidden) restores into wider layers too. A layer's
+saved kernel fills the top-left block; the rows of new inputs or new units of the layer below
+are zero for the saved units, and the new units' own columns (and biases) keep the fresh
+model's initial values (its Adam moments: zero). The saved units never hear from the new ones
+and the output layer gets only zero rows from them, so the grown actor acts as the saved one;
+the new units' outgoing rows get gradients at once (their activations are not zero), so they
+join in as training goes on (the zero-outgoing-weight form of Net2Net widening, Chen et al.
+2016).
 """
 
 from typing import Any
@@ -32,6 +41,13 @@ ACTOR_INPUT_LEAVES = (
     "['state']",  # normalizer mean / std / summed_variance
 )
 GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, not 'rollout'
+# The actor head's layers (kernels and biases, in params and the Adam moments): these may also
+# grow along their output axis (a wider network.actor_hidden), see grow_width.
+WIDTH_LEAVES = ("['actor']['dense_", "['actor']['out']")
+
+
+def _is_width_leaf(name: str) -> bool:
+    return any(k in name for k in WIDTH_LEAVES)
 
 
 def grown_leaves(saved_manifest: list, target: Any, actor: bool = False) -> dict[str, tuple]:
@@ -48,13 +64,12 @@ def grown_leaves(saved_manifest: list, target: Any, actor: bool = False) -> dict
     for path, x in jax.tree_util.tree_flatten_with_path(target)[0]:
         name = jax.tree_util.keystr(path)
         old, new = saved.get(name), tuple(np.shape(x))
-        if (
-            old is not None
-            and any(k in name for k in leaves)
-            and len(old) == len(new) >= 1
-            and old[0] < new[0]
-            and old[1:] == new[1:]
-        ):
+        if old is None or len(old) != len(new) or len(old) < 1 or old == new:
+            continue
+        if _is_width_leaf(name):  # the actor head: any axis may grow (grow_width)
+            if all(o <= n for o, n in zip(old, new, strict=True)):
+                out[name] = old
+        elif any(k in name for k in leaves) and old[0] < new[0] and old[1:] == new[1:]:
             out[name] = old
     return out
 
@@ -74,22 +89,46 @@ def shaped_as_saved(target: Any, grown: dict[str, tuple]) -> Any:
 
 def grow_tree(tree: Any, target: Any, grown: dict[str, tuple]) -> Any:
     """The restored `tree` with its `grown` leaves embedded in `target`'s shapes (grow_rows; a
-    normalizer's new entries get the variance-1 summed variance of its sample count)."""
+    normalizer's new entries get the variance-1 summed variance of its sample count; the actor
+    head's layers by grow_width, whose new units keep `target`'s values)."""
     count = 0.0
     if "normalizer" in tree:
         c = tree["normalizer"].count
         count = float(np.asarray(getattr(c, "hi", 0))) * 2.0**32 + float(
             np.asarray(getattr(c, "lo", c))
         )
+
+    def grow(name, x, t):
+        if _is_width_leaf(name):
+            return grow_width(x, t)
+        return grow_rows(name, x, np.shape(t), count)
+
     return jax.tree_util.tree_map_with_path(
         lambda p, x, t: (
-            jax.numpy.asarray(grow_rows(jax.tree_util.keystr(p), x, np.shape(t), count))
+            jax.numpy.asarray(grow(jax.tree_util.keystr(p), x, t))
             if jax.tree_util.keystr(p) in grown
             else x
         ),
         tree,
         target,
     )
+
+
+def grow_width(value: Any, target: Any) -> np.ndarray:
+    """A saved actor-head leaf embedded in the wider `target` leaf (module docstring): a kernel
+    (in, out) keeps its saved block [:in0, :out0], zero rows [in0:, :out0] (new inputs or units
+    below do not reach the saved units) and `target`'s new columns [:, out0:] (the new units'
+    fresh weights); a bias (out,) keeps [:out0] and `target`'s new entries."""
+    value, out = np.asarray(value), np.array(target, dtype=np.asarray(value).dtype)
+    if value.ndim == 1:
+        out[: value.shape[0]] = value
+        return out
+    if value.ndim != 2:
+        raise ValueError(f"grow_width: a kernel or bias, got shape {value.shape}")
+    n_in, n_out = value.shape
+    out[:n_in, :n_out] = value
+    out[n_in:, :n_out] = 0.0
+    return out
 
 
 def grow_rows(name: str, value: Any, shape: tuple, count: float) -> np.ndarray:

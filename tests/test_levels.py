@@ -122,6 +122,44 @@ def test_gap_direction_on_hand_made_gaps():
     assert GAP_DIRECTIONS[gap_direction(np.zeros((1, 2)), wide_crossing)[0]] == "crossing"
 
 
+def test_stone_distance_on_hand_made_gaps_and_its_lines():
+    """foottof.eval.failures.stone_distance against distances worked out by hand on analytic
+    terrains (0 m stone, -1 m pit; the error is at most one diagonal step of the 1 cm sampling
+    grid), and format_rims."""
+    import numpy as np
+
+    from foottof.eval.failures import RIM_GRID_STEP_M, format_rims, stone_distance
+
+    def terrain(pit):
+        return lambda p: np.where(pit(np.asarray(p)[..., 0], np.asarray(p)[..., 1]), -1.0, 0.0)
+
+    crossing = terrain(lambda x, y: np.abs(x) < 0.15)  # 0.3 m gap across the path
+    feet = np.array([[0.0, 0.0], [0.1, 0.02], [-0.13, -0.2]])
+    want = np.array([0.15, 0.05, 0.02])  # to the nearer rim x = +-0.15
+    tol = RIM_GRID_STEP_M * np.sqrt(2.0)
+    got = stone_distance(feet, crossing)
+    np.testing.assert_allclose(got, want, atol=tol)
+    # A junction: stone only where x > 0.1 and y > 0.1; from (0, 0) the corner (0.1, 0.1).
+    corner = terrain(lambda x, y: ~((x > 0.1) & (y > 0.1)))
+    got = stone_distance(np.array([[0.0, 0.0], [0.15, -0.05]]), corner)
+    np.testing.assert_allclose(got, [np.hypot(0.1, 0.1), 0.15], atol=tol)
+    # No stone within 0.3 m (a 2 m pit), and flat ground: inf.
+    wide = terrain(lambda x, y: np.abs(x) < 1.0)
+    flat = terrain(lambda x, y: np.zeros_like(x, bool))
+    assert np.isinf(stone_distance(np.zeros((1, 2)), wide)).all()
+    assert np.isinf(stone_distance(np.zeros((1, 2)), flat)).all()
+
+    rim = np.array([0.02, 0.05, np.nan, 0.2, 0.1])
+    gap = np.array([0, 0, -1, 2, 2])
+    lines = format_rims(rim, gap).splitlines()
+    assert lines[0] == (
+        "foot_stuck, all (4): the foot centre was a median 7.5 cm from the nearest stone top; "
+        "< 4 cm 1, 4-8 cm 1, 8-15 cm 1, >= 15 cm 1"
+    )
+    assert lines[1].startswith("foot_stuck, crossing (2): the foot centre was a median 3.5 cm")
+    assert lines[2].startswith("foot_stuck, junction (2)") and len(lines) == 3
+
+
 def test_gap_lines_count_per_type():
     import numpy as np
 
@@ -270,11 +308,13 @@ def test_failures_on_the_training_map_cover_every_column_type():
     cfg.stage = 2
     cfg.terrain.num_cols = 9
     cfg.env.episode_length_s = 0.4  # 20 steps: the causes, not the walk, are under test
-    cause, types, end_step, progress, foot, gap, rows = run(cfg, None, 9, 3, training_level=1)
+    cause, types, end_step, progress, foot, gap, rim, rows = run(cfg, None, 9, 3, training_level=1)
     expected = [TERRAIN_TYPES[t] for t in allocate_columns(cfg.terrain.stage2_weights, 9)]
     assert types == expected
     assert {"beam", "stairs", "pyramid_up", "pyramid_down"} <= set(types)
-    assert cause.shape == end_step.shape == progress.shape == (9,) and rows is None
+    assert cause.shape == end_step.shape == progress.shape == rim.shape == (9,) and rows is None
+    stuck = cause == CAUSES.index("foot_stuck")
+    assert np.isnan(rim[~stuck]).all() and not np.isnan(rim[stuck]).any()
     assert set(cause.tolist()) <= set(range(len(CAUSES)))
     with pytest.raises(ValueError, match=r"training level 2 outside the map's levels \[0, 1\]"):
         run(cfg, None, 9, 3, training_level=2)

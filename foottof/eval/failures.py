@@ -17,7 +17,8 @@ terrain around that foot before the last step (:func:`gap_direction`; the course
 ``crossing`` (stone ahead of and behind the foot, open to the sides: a gap across the path),
 ``along`` (stone to both sides, open ahead and behind: a gap running along the course, between
 columns of stones), ``junction`` (open both ways: where gaps cross, or a wide pit) and
-``hole`` (stone all around).
+``hole`` (stone all around). And how far from the nearest stone top that foot was
+(:func:`stone_distance`): grazing a rim, or put down in the open.
 
 With ``--training_level L`` it runs on the training map of ``--config`` instead, every env at
 curriculum level L, one column after another (so every terrain type of the stage is covered),
@@ -71,6 +72,34 @@ def gap_direction(foot_xy, height_at) -> np.ndarray:
     return np.select([ahead_behind & sides, ahead_behind, sides], [3, 0, 1], default=2).astype(
         np.int64
     )
+
+
+RIM_GRID_STEP_M = 0.01  # stone_distance samples the terrain on this grid around the foot [m]
+RIM_REACH_M = 0.3  # ... out to this distance from the foot centre (inf: no stone that near) [m]
+RIM_BINS_M = (0.04, 0.08, 0.15)  # format_rims' bins: < 4 cm is within a foot radius and a cm
+
+
+def stone_distance(foot_xy, height_at) -> np.ndarray:
+    """(N,) horizontal distance from each foot centre to the nearest stone top [m]: the terrain
+    sampled on a RIM_GRID_STEP_M grid within RIM_REACH_M of the foot, stone = within
+    GAP_STONE_STEP_M of the highest sample (as :func:`gap_direction`); inf where every sample
+    lies within GAP_STONE_STEP_M of one height (a pit wider than the reach, or flat ground).
+
+    Of a foot that went into a gap, this says how far off the stone it came down: within a foot
+    radius (3.15 cm) it grazed the rim, tens of cm it was put down in the open.
+    """
+    foot_xy = np.asarray(foot_xy, np.float64).reshape(-1, 2)
+    n = int(round(RIM_REACH_M / RIM_GRID_STEP_M))
+    u = np.arange(-n, n + 1) * RIM_GRID_STEP_M
+    off = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
+    r = np.linalg.norm(off, axis=-1)
+    off, r = off[r <= RIM_REACH_M + 1e-9], r[r <= RIM_REACH_M + 1e-9]
+    h = np.asarray(height_at(foot_xy[:, None, :] + off[None]), np.float64)  # (N, P)
+    top = h.max(axis=1)
+    has_stone = top - h.min(axis=1) > GAP_STONE_STEP_M
+    stone = h > (top - GAP_STONE_STEP_M)[:, None]
+    dist = np.where(stone, r[None], np.inf).min(axis=1)
+    return np.where(has_stone, dist, np.inf)
 
 
 SIGHT_RADIUS_M = 0.08  # a ray looked at a spot when it crossed the stone-top plane this near [m]
@@ -212,7 +241,9 @@ def run(
     i on column i mod the map's columns at that curriculum level. ``checkpoint`` None: a fresh
     init. Returns (cause per env, terrain type name per env, end step, progress at the end, the
     foot that went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
-    direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck) and, with
+    direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck, that foot's
+    distance to the nearest stone top before the last step, :func:`stone_distance` [m], nan
+    where not foot_stuck) and, with
     ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
     swing, teacher-input look lead, teacher-input gap lead) row per foot_stuck episode
     (:func:`sighting_summary`; the own-sensor lead from the stuck foot's sensor alone; the
@@ -296,6 +327,7 @@ def run(
     xy = foot_pos[t, e, np.maximum(foot, 0), :2]  # (E, 2) the foot that went in
     height_at = lambda p: np.asarray(env.hfield.height_at(jp.asarray(p, jp.float32)))  # noqa: E731
     gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
+    rim = np.where(is_stuck, stone_distance(xy, height_at), np.nan)
     rows = None
     if sight:
         origins, dirs, t_hit, scan_xy, scan_h, *flags = rays
@@ -323,7 +355,7 @@ def run(
                 foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap
             )[1:3]
             rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung, scan_look, scan_gap))
-    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rows
+    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rim, rows
 
 
 def format_sightings(rows, gap) -> str:
@@ -380,6 +412,33 @@ def format_gaps(gap: np.ndarray, types) -> str:
     return "\n".join(lines)
 
 
+def format_rims(rim: np.ndarray, gap: np.ndarray) -> str:
+    """One line per gap direction with foot_stuck episodes: how far from the nearest stone top
+    the foot was (rim: :func:`stone_distance` per episode, nan where not foot_stuck), median
+    and counts in the RIM_BINS_M bins."""
+    edges = (0.0,) + RIM_BINS_M + (np.inf,)
+    names = [f"< {100 * RIM_BINS_M[0]:g} cm"]
+    names += [
+        f"{100 * a:g}-{100 * b:g} cm" for a, b in zip(RIM_BINS_M[:-1], RIM_BINS_M[1:], strict=True)
+    ]
+    names += [f">= {100 * RIM_BINS_M[-1]:g} cm"]
+    lines = []
+    for d, name in [(None, "all")] + list(enumerate(GAP_DIRECTIONS)):
+        sel = ~np.isnan(rim) & ((gap == d) if d is not None else True)
+        if not sel.any():
+            continue
+        r = rim[sel]
+        counts = ", ".join(
+            f"{label} {int(np.sum((r >= a) & (r < b)))}"
+            for label, a, b in zip(names, edges[:-1], edges[1:], strict=True)
+        )
+        lines.append(
+            f"foot_stuck, {name} ({int(sel.sum())}): the foot centre was a median "
+            f"{100 * np.median(r):.1f} cm from the nearest stone top; {counts}"
+        )
+    return "\n".join(lines)
+
+
 def format_table(cause, types, end_step, progress) -> str:
     lines = [
         "| terrain | episodes | " + " | ".join(CAUSES) + " |",
@@ -431,12 +490,13 @@ def main(argv=None) -> None:
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     try:
-        cause, types, end_step, progress, foot, gap, rows = run(
+        cause, types, end_step, progress, foot, gap, rim, rows = run(
             cfg, args.run_dir, args.episodes, args.seed, args.sightings, args.training_level
         )
         print(format_table(cause, types, end_step, progress))
         print(format_feet(foot))
         print(format_gaps(gap, types))
+        print(format_rims(rim, gap))
         if rows is not None:
             print(format_sightings(rows, gap))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:

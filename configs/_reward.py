@@ -32,6 +32,7 @@ def get_section() -> ml_collections.ConfigDict:
     s.termination = (
         -1.0
     )  # sparse: 1 on a failure termination (fall, base contact, flip, divergence)
+    s.timeout = 0.0  # sparse: 1 at the time limit outside success_radius_m (0 = off)
     s.torques = -1e-5  # sum of squared joint torques [(N m)^2]
     s.joint_acc = -2.5e-7  # sum of squared joint accelerations [(rad/s^2)^2]
     s.action_rate = -0.01  # sum of squared action differences between control steps

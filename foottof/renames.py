@@ -50,6 +50,7 @@ ADDED_FIELDS = {
     "env.physics_threads": 0,  # os.cpu_count() MuJoCo C threads
     "network.max_noise_std": 0.0,  # no cap on the action std
     "reward.scales.overspeed": 0.0,  # off: base speed is not penalized
+    "reward.scales.timeout": 0.0,  # off: the deadline away from the goal costs nothing
     "reward.overspeed_mps": 0.6,  # read only when the overspeed term is on
 }
 # Added fields that were already in the configs of the evaluations kept (results/): draw

@@ -331,6 +331,10 @@ def test_reward_terms_hand_checked():
     assert _terms(goal_xy=jp.array([0.4, 0.0]), truncated=jp.asarray(1.0))["reach"] == 1.0
     assert _terms(goal_xy=jp.array([0.6, 0.0]), truncated=jp.asarray(1.0))["reach"] == 0.0
     assert _terms(goal_xy=jp.array([0.4, 0.0]))["reach"] == 0.0
+    # Timeout: only at the time limit and outside 0.5 m (a failure is not a timeout).
+    assert _terms(goal_xy=jp.array([0.6, 0.0]), truncated=jp.asarray(1.0))["timeout"] == 1.0
+    assert _terms(goal_xy=jp.array([0.4, 0.0]), truncated=jp.asarray(1.0))["timeout"] == 0.0
+    assert _terms(goal_xy=jp.array([0.6, 0.0]), failed=jp.asarray(1.0))["timeout"] == 0.0
     # Termination.
     assert _terms(failed=jp.asarray(1.0))["termination"] == 1.0
     # Collision: number of knees touching the terrain.
@@ -348,6 +352,7 @@ def test_reward_terms_hand_checked():
     # Scaling: dense terms get the control dt, sparse ones not.
     scaled = rw.scaled_terms({k: jp.asarray(1.0) for k in rw.REWARD_TERMS}, rcfg.scales, 0.02)
     assert float(scaled["reach"]) == pytest.approx(rcfg.scales.reach)
+    assert float(scaled["timeout"]) == pytest.approx(rcfg.scales.timeout)
     assert float(scaled["torques"]) == pytest.approx(rcfg.scales.torques * 0.02)
 
 

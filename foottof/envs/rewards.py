@@ -28,7 +28,7 @@ DENSE_TERMS = (
     "foot_clearance",
     "overspeed",
 )
-SPARSE_TERMS = ("reach", "termination")
+SPARSE_TERMS = ("reach", "termination", "timeout")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
 
 
@@ -256,6 +256,8 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
     target = spec.clearance_target_m
     return {
         "reach": x.truncated * at_goal,
+        # the deadline away from the goal: priced like a fall, stopping on the way stops paying
+        "timeout": x.truncated * (1.0 - at_goal),
         "termination": x.failed,
         "task": task,
         "guidance": guidance,
@@ -313,7 +315,8 @@ def total_reward(terms: dict[str, jax.Array], only_positive: bool, valid: jax.Ar
     ``only_positive`` is legged_gym's ``only_positive_rewards`` ("avoids early termination
     problems"): the dense terms can make a step worth nothing but never negative, so a policy
     learning to walk is not paid less than one standing still for each stumble; the sparse
-    ``reach`` and ``termination`` are added after the clip (as legged_gym adds termination).
+    ``reach``, ``termination`` and ``timeout`` are added after the clip (as legged_gym adds
+    termination).
 
     Args:
       terms: scaled terms keyed by REWARD_TERMS (scalars).

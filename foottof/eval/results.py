@@ -146,12 +146,7 @@ def migrate_ensemble(ensemble):
         return ensemble
     if ensemble.get("deterministic") is not True:
         return ensemble
-    out = {}
-    for k, v in ensemble.items():
-        if k == "fingerprint":
-            out["action_std_cap"] = None
-        out[k] = v
-    return out
+    return dict(ensemble, action_std_cap=None)
 
 
 def ensemble_caption(ensemble: dict, rows: list[dict], checkpoints: list[str] = ()) -> str:

@@ -269,13 +269,20 @@ def test_ensemble_is_recorded_and_captioned():
         results.results_document([], None, 10.0, {"difficulty_fraction": 0.9})
 
 
-def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
+def _record_figures(monkeypatch) -> list:
+    """plots.robustness_png replaced by a recorder: the list gets (rows, caption, left_out) of
+    every figure drawn."""
     drawn = []
     monkeypatch.setattr(
         plots,
         "robustness_png",
         lambda rows, caption, left_out: drawn.append((rows, caption, left_out)) or b"png",
     )
+    return drawn
+
+
+def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
+    drawn = _record_figures(monkeypatch)
     cfg = smoke.get_config()
     easy = results.ensemble_setting(cfg)
     cfg.eval.difficulty_fraction = 0.125
@@ -319,12 +326,7 @@ def test_figure_draws_only_results_of_the_same_ensemble(tmp_path, monkeypatch):
 
 
 def test_sampled_results_record_their_action_std_cap_and_old_files_migrate(tmp_path, monkeypatch):
-    drawn = []
-    monkeypatch.setattr(
-        plots,
-        "robustness_png",
-        lambda rows, caption, left_out: drawn.append((rows, caption, left_out)) or b"png",
-    )
+    drawn = _record_figures(monkeypatch)
     cfg = smoke.get_config()
     mean = results.ensemble_setting(cfg)
     cfg.eval.deterministic = False

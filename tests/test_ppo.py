@@ -358,6 +358,25 @@ def test_checkpoint_with_a_renamed_env_metric_restores_without_it(tmp_path, trai
     checkpointer.close()
 
 
+def _assert_same_policy(trainer_a, state_a, trainer_b, state_b) -> None:
+    """Equal action means and values of two models on random observations shaped like state_a's
+    (random, so every observation row of a grown kernel is used)."""
+    leaves, treedef = jax.tree.flatten(state_a.env_state.obs)
+    keys = jax.random.split(jax.random.PRNGKey(5), len(leaves))
+    obs = jax.tree.unflatten(
+        treedef, [jax.random.normal(k, x.shape) for k, x in zip(keys, leaves, strict=True)]
+    )
+    resets = jp.zeros(state_a.prev_done.shape, bool)
+    _, mean_a, _, value_a = trainer_a.networks.step(
+        state_a.params, state_a.normalizer, state_a.carry, obs, resets
+    )
+    _, mean_b, _, value_b = trainer_b.networks.step(
+        state_b.params, state_b.normalizer, state_b.carry, obs, resets
+    )
+    np.testing.assert_allclose(mean_b, mean_a, atol=1e-6)
+    np.testing.assert_allclose(value_b, value_a, atol=1e-6)
+
+
 def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
     tmp_path, trained_once, capsys
 ):
@@ -397,20 +416,7 @@ def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
     assert tree_equal(saved.normalizer, restored.normalizer)
     assert tree_equal(saved.env_state, restored.env_state)
 
-    leaves, treedef = jax.tree.flatten(saved.env_state.obs)
-    keys = jax.random.split(jax.random.PRNGKey(5), len(leaves))
-    obs = jax.tree.unflatten(  # random observations: every obs row of the grown kernels is used
-        treedef, [jax.random.normal(k, x.shape) for k, x in zip(keys, leaves, strict=True)]
-    )
-    resets = jp.zeros(saved.prev_done.shape, bool)
-    _, mean0, _, value0 = trainer.networks.step(
-        saved.params, saved.normalizer, saved.carry, obs, resets
-    )
-    _, mean1, _, value1 = skip_trainer.networks.step(
-        restored.params, restored.normalizer, restored.carry, obs, resets
-    )
-    np.testing.assert_allclose(mean1, mean0, atol=1e-6)
-    np.testing.assert_allclose(value1, value0, atol=1e-6)
+    _assert_same_policy(trainer, saved, skip_trainer, restored)
 
 
 def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn(tmp_path, capsys):
@@ -452,20 +458,7 @@ def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn
         if leaf.ndim == 2 and leaf.shape[1] == 12:  # dense_1's moments: new columns are zero
             assert not np.any(leaf[:, 6:])
 
-    leaves, treedef = jax.tree.flatten(saved.env_state.obs)
-    keys = jax.random.split(jax.random.PRNGKey(5), len(leaves))
-    obs = jax.tree.unflatten(
-        treedef, [jax.random.normal(k, x.shape) for k, x in zip(keys, leaves, strict=True)]
-    )
-    resets = jp.zeros(saved.prev_done.shape, bool)
-    _, mean0, _, value0 = trainer.networks.step(
-        saved.params, saved.normalizer, saved.carry, obs, resets
-    )
-    _, mean1, _, value1 = wide_trainer.networks.step(
-        restored.params, restored.normalizer, restored.carry, obs, resets
-    )
-    np.testing.assert_allclose(mean1, mean0, atol=1e-6)
-    np.testing.assert_allclose(value1, value0, atol=1e-6)
+    _assert_same_policy(trainer, saved, wide_trainer, restored)
 
     after, _ = wide_trainer.iteration(jax.device_put(restored))
     out_rows = np.asarray(after.params["params"]["actor"]["out"]["kernel"])[6:]

@@ -88,12 +88,16 @@ def test_teacher_env_shows_the_student_its_inputs_only(teacher_and_student):
     )
 
 
-def test_student_cut_from_teacher_acts_as_teacher_without_its_extra_inputs():
+@pytest.mark.parametrize("obs_skip", [False, True])
+def test_student_cut_from_teacher_acts_as_teacher_without_its_extra_inputs(obs_skip):
     """student_from_teacher: an LSTM student of the teacher's size starts as the teacher with
     the extra inputs' weights dropped, so on observations whose extra inputs are at their
-    normalizer mean (normalized to 0) both act alike; an MLP teacher gives None."""
+    normalizer mean (normalized to 0) both act alike; an MLP teacher gives None. With
+    network.obs_skip (the wide teacher) the heads' first kernels read [h, obs] too: their extra
+    observation rows are the last ones, and the cut drops exactly those."""
     tenv = toy_envs.make_memory_env(EPISODE, teacher=True)
     cfg = small_cfg("lstm")
+    cfg.network.obs_skip = obs_skip
     ttrain = train_lib.make_train(tenv, cfg)
     tstate = ttrain.init(jax.random.PRNGKey(0))
     tstate, _ = ttrain.iteration(tstate)

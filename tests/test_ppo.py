@@ -381,8 +381,9 @@ def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
     tmp_path, trained_once, capsys
 ):
     """A checkpoint of heads that read the LSTM output only resumes into network.obs_skip heads:
-    the new observation rows of both heads' first kernels (and their Adam moments) start at
-    zero, every other leaf comes back as saved, so actions and values are the saved model's."""
+    the new observation rows of both heads' first kernels (and their first Adam moments) start at
+    zero, their second moments at the saved leaf's mean (input_growth.seed_second_moment), every
+    other leaf comes back as saved, so actions and values are the saved model's."""
     trainer, state = trained_once
     saved = jax.device_get(state)
     checkpointer = ckpt.Checkpointer(str(tmp_path))
@@ -404,13 +405,18 @@ def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
         assert old.shape[0] == h and new.shape[0] > h
         np.testing.assert_array_equal(new[:h], old)
         assert not np.any(new[h:])
-    old_moments, new_moments = jax.tree.leaves(saved.opt_state), jax.tree.leaves(restored.opt_state)
+    old_moments = jax.tree_util.tree_flatten_with_path(saved.opt_state)[0]
+    new_moments = jax.tree.leaves(restored.opt_state)
     assert len(old_moments) == len(new_moments)
-    for old, new in zip(old_moments, new_moments, strict=True):
+    for (path, old), new in zip(old_moments, new_moments, strict=True):
         old, new = np.asarray(old), np.asarray(new)
-        if old.shape != new.shape:  # a grown kernel's moments: saved rows, then zeros
+        if old.shape != new.shape:  # a grown kernel's moments: saved rows, then the new rows'
             np.testing.assert_array_equal(new[: old.shape[0]], old)
-            assert not np.any(new[old.shape[0] :])
+            if ".nu[" in jax.tree_util.keystr(path):  # second moment: the saved leaf's mean
+                np.testing.assert_allclose(new[old.shape[0] :], old.mean(), rtol=1e-6)
+                assert old.mean() > 0
+            else:  # first moment: zero
+                assert not np.any(new[old.shape[0] :])
         else:
             np.testing.assert_array_equal(new, old)
     assert tree_equal(saved.normalizer, restored.normalizer)
@@ -423,7 +429,8 @@ def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn
     """A checkpoint whose actor head is (8, 6) resumes into obs_skip heads with an actor head of
     (16, 12) (input_growth.grow_width): saved blocks as saved, the new units' incoming weights
     as the fresh model's, zero weights from them (and from the new observation rows) into the
-    saved units and the output, zero Adam moments; the actions are the saved model's, and one
+    saved units and the output, zero first Adam moments and second ones seeded at the saved
+    layer's mean; the actions are the saved model's, and one
     iteration later the output layer has learned to read the new units."""
     env = toy_envs.make_memory_env(privileged=True)
     cfg = tiny_cfg()
@@ -453,10 +460,19 @@ def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn
         np.testing.assert_array_equal(k_new[:, n_out:], k_init[:, n_out:])  # fresh new units
         np.testing.assert_array_equal(np.asarray(new[layer]["bias"])[:n_out], old[layer]["bias"])
     assert np.any(np.asarray(new["dense_1"]["kernel"])[:, 6:])  # the new units are not dead
-    for leaf in jax.tree.leaves(restored.opt_state):  # saved moments (equal) or new ones (zero)
-        leaf = np.asarray(leaf)
-        if leaf.ndim == 2 and leaf.shape[1] == 12:  # dense_1's moments: new columns are zero
-            assert not np.any(leaf[:, 6:])
+    adam_old, adam_new = (x.opt_state.inner_state[1][0] for x in (saved, restored))
+    for moment in ("mu", "nu"):  # dense_1's kernel: the saved block as saved, the rest new
+        old, new = (
+            np.asarray(getattr(a, moment)["params"]["actor"]["dense_1"]["kernel"])
+            for a in (adam_old, adam_new)
+        )
+        np.testing.assert_array_equal(new[:8, :6], old)
+        if moment == "mu":  # no direction assumed
+            assert not np.any(new[8:]) and not np.any(new[:, 6:])
+        else:  # input_growth.seed_second_moment: the saved entries' mean, not 0
+            assert old.mean() > 0
+            np.testing.assert_allclose(new[8:], old.mean(), rtol=1e-6)
+            np.testing.assert_allclose(new[:, 6:], old.mean(), rtol=1e-6)
 
     _assert_same_policy(trainer, saved, wide_trainer, restored)
 

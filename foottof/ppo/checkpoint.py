@@ -232,7 +232,8 @@ class Checkpointer:
 
         A model whose network reads more inputs than the saved one (input_growth.INPUT_LEAVES,
         e.g. network.obs_skip heads) gets the saved kernels with zero rows for the new inputs, and
-        zero Adam moments for them; a wider actor head (network.actor_hidden) gets the saved
+        for them zero first Adam moments and second ones at the saved leaf's mean
+        (input_growth.seed_second_moment); a wider actor head (network.actor_hidden) gets the saved
         layers with its new units cut off from the saved ones (input_growth.grow_width): it
         acts as the saved one did.
 

@@ -2,17 +2,19 @@
 
 When a run adds inputs at the end (critic inputs such as env.critic_height_scan; network.obs_skip's
 observation beside the LSTM output; on request the actor's, env.actor_terrain), init_from or a
-resume from a run without them restores the saved kernels with zero rows for the new inputs, zero
-Adam moments for them and normalizer entries of mean 0 / variance 1: the grown network acts as the
-saved one did. The names below match inside params, the optimizer's moments and the normalizer.
+resume from a run without them restores the saved kernels with zero rows for the new inputs and
+normalizer entries of mean 0 / variance 1: the grown network acts as the saved one did. A resume
+also grows the Adam moments: the new entries' first moments zero, their second moments seeded at
+the saved leaf's mean (seed_second_moment; init_from starts a fresh optimizer). The names below
+match inside params, the optimizer's moments and the normalizer.
 
-Width growth: the actor head (network.actor_hidden) restores into wider layers too. A layer's
-saved kernel fills the top-left block; the rows of new inputs or new units of the layer below
-are zero for the saved units, and the new units' own columns (and biases) keep the fresh
-model's initial values (its Adam moments: zero). The saved units never hear from the new ones
-and the output layer gets only zero rows from them, so the grown actor acts as the saved one;
-the new units' outgoing rows get gradients at once (their activations are not zero), so they
-join in as training goes on (the zero-outgoing-weight form of Net2Net widening, Chen et al.
+Width growth: the actor head (network.actor_hidden) restores into wider layers too. A layer's saved
+kernel fills the top-left block; the rows of new inputs or new units of the layer below are zero
+for the saved units, and the new units' own columns (and biases) keep the fresh model's initial
+values (Adam: first moment zero, second moment seeded as above). The saved units never hear from
+the new ones and the output layer gets only zero rows from them, so the grown actor acts as the
+saved one; the new units' outgoing rows get gradients at once (their activations are not zero), so
+they join in as training goes on (the zero-outgoing-weight form of Net2Net widening, Chen et al.
 2016).
 """
 
@@ -44,6 +46,7 @@ GROWABLE_ITEMS = ("params", "opt_state", "normalizer")  # a resume grows these, 
 # The actor head's layers (kernels and biases, in params and the Adam moments): these may also
 # grow along their output axis (a wider network.actor_hidden), see grow_width.
 WIDTH_LEAVES = ("['actor']['dense_", "['actor']['out']")
+SECOND_MOMENT = ".nu["  # optax's Adam state: mu (first moment), nu (second moment)
 
 
 def _is_width_leaf(name: str) -> bool:
@@ -99,9 +102,10 @@ def grow_tree(tree: Any, target: Any, grown: dict[str, tuple]) -> Any:
         )
 
     def grow(name, x, t):
-        if _is_width_leaf(name):
-            return grow_width(x, t)
-        return grow_rows(name, x, np.shape(t), count)
+        out = grow_width(x, t) if _is_width_leaf(name) else grow_rows(name, x, np.shape(t), count)
+        if SECOND_MOMENT in name:
+            out = seed_second_moment(out, x)
+        return out
 
     return jax.tree_util.tree_map_with_path(
         lambda p, x, t: (
@@ -128,6 +132,30 @@ def grow_width(value: Any, target: Any) -> np.ndarray:
     n_in, n_out = value.shape
     out[:n_in, :n_out] = value
     out[n_in:, :n_out] = 0.0
+    return out
+
+
+def seed_second_moment(grown: Any, saved: Any) -> np.ndarray:
+    """An Adam second moment (``nu``) grown from `saved`: its new entries (outside the saved
+    leading block) set to the mean of the saved entries, the saved block as saved.
+
+    A resume restores Adam's step count, so bias correction no longer scales a new entry's
+    moments up: from nu = 0, with a steady gradient g, its steps are (1 - b1^k) / sqrt(k (1 - b2))
+    times the learning rate after k steps (3x at the first, 6.5x at the tenth, still 3x at the
+    hundredth), where a settled entry's are at most ~1x, until nu has caught up after ~1 / (1 -
+    b2) = 1000 Adam steps (~60 iterations at 4 epochs x 4 minibatches). The wide teacher's first
+    grown iterations showed it: the KL-adaptive rate fell from 1e-4 to 1.4e-5 and took ~50
+    iterations to recover. Seeded at the layer's typical squared gradient, a new entry's steps
+    start at the size of its neighbours' (the first moment stays zero: no direction is assumed).
+    """
+    saved = np.asarray(saved)
+    out = np.array(grown, dtype=saved.dtype)
+    if saved.size == 0:
+        return out
+    old = tuple(slice(0, n) for n in saved.shape)
+    new = np.ones(out.shape, bool)
+    new[old] = False
+    out[new] = saved.mean()
     return out
 
 

@@ -308,11 +308,13 @@ def test_failures_on_the_training_map_cover_every_column_type():
     cfg.stage = 2
     cfg.terrain.num_cols = 9
     cfg.env.episode_length_s = 0.4  # 20 steps: the causes, not the walk, are under test
-    cause, types, end_step, progress, foot, gap, rim, rows = run(cfg, None, 9, 3, training_level=1)
+    f = run(cfg, None, 9, 3, training_level=1)
+    cause, types, rim = f.cause, f.types, f.rim
     expected = [TERRAIN_TYPES[t] for t in allocate_columns(cfg.terrain.stage2_weights, 9)]
     assert types == expected
     assert {"beam", "stairs", "pyramid_up", "pyramid_down"} <= set(types)
-    assert cause.shape == end_step.shape == progress.shape == rim.shape == (9,) and rows is None
+    assert cause.shape == f.end_step.shape == f.progress.shape == rim.shape == (9,)
+    assert f.sightings is None
     stuck = cause == CAUSES.index("foot_stuck")
     assert np.isnan(rim[~stuck]).all() and not np.isnan(rim[stuck]).any()
     assert set(cause.tolist()) <= set(range(len(CAUSES)))

@@ -35,6 +35,7 @@ anyway is a limit of the policy.
 from __future__ import annotations
 
 import argparse
+from typing import NamedTuple
 
 import numpy as np
 
@@ -228,6 +229,19 @@ def training_env_and_policy(cfg, checkpoint: str | None, key, level: int):
     return (env, *load_policy(cfg, env, obs, checkpoint, key))
 
 
+class Failures(NamedTuple):
+    """What :func:`run` returns, one entry per env (a tuple: it unpacks in this order)."""
+
+    cause: np.ndarray  # (N,) index into CAUSES
+    types: list  # (N,) terrain type name
+    end_step: np.ndarray  # (N,) the step the episode ended on
+    progress: np.ndarray  # (N,) progress towards the goal at the end [-]
+    foot: np.ndarray  # (N,) index into constants.FEET of the foot in the gap; -1: not foot_stuck
+    gap: np.ndarray  # (N,) index into GAP_DIRECTIONS of that gap; -1: not foot_stuck
+    rim: np.ndarray  # (N,) that foot's distance to the nearest stone top [m]; nan: not foot_stuck
+    sightings: list | None  # one row per foot_stuck episode (sighting_summary), or None
+
+
 def run(
     cfg,
     checkpoint: str | None,
@@ -239,12 +253,11 @@ def run(
     """With ``training_level`` None, on the evaluation ensemble (``cfg.eval``); else on the
     training map of ``cfg`` (its stage, randomization and sensor degradation as in training), env
     i on column i mod the map's columns at that curriculum level. ``checkpoint`` None: a fresh
-    init. Returns (cause per env, terrain type name per env, end step, progress at the end, the
-    foot that went into the gap: index into constants.FEET, -1 where the cause is not foot_stuck, the
-    direction of that gap: index into GAP_DIRECTIONS, -1 where not foot_stuck, that foot's
-    distance to the nearest stone top before the last step, :func:`stone_distance` [m], nan
-    where not foot_stuck) and, with
-    ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
+    init. Returns :class:`Failures`: the cause per env, terrain type name per env, end step,
+    progress at the end, the foot that went into the gap (index into constants.FEET, -1 where
+    the cause is not foot_stuck), the direction of that gap (index into GAP_DIRECTIONS, -1 where
+    not foot_stuck), that foot's distance to the nearest stone top before the last step
+    (:func:`stone_distance` [m], nan where not foot_stuck) and, with ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
     swing, teacher-input look lead, teacher-input gap lead) row per foot_stuck episode
     (:func:`sighting_summary`; the own-sensor lead from the stuck foot's sensor alone; the
     teacher-input leads from the env.actor_terrain sample points, :func:`scan_sightings`, whether
@@ -355,7 +368,7 @@ def run(
                 foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap
             )[1:3]
             rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung, scan_look, scan_gap))
-    return cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rim, rows
+    return Failures(cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rim, rows)
 
 
 def format_sightings(rows, gap) -> str:
@@ -490,15 +503,13 @@ def main(argv=None) -> None:
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction
     try:
-        cause, types, end_step, progress, foot, gap, rim, rows = run(
-            cfg, args.run_dir, args.episodes, args.seed, args.sightings, args.training_level
-        )
-        print(format_table(cause, types, end_step, progress))
-        print(format_feet(foot))
-        print(format_gaps(gap, types))
-        print(format_rims(rim, gap))
-        if rows is not None:
-            print(format_sightings(rows, gap))
+        f = run(cfg, args.run_dir, args.episodes, args.seed, args.sightings, args.training_level)
+        print(format_table(f.cause, f.types, f.end_step, f.progress))
+        print(format_feet(f.foot))
+        print(format_gaps(f.gap, f.types))
+        print(format_rims(f.rim, f.gap))
+        if f.sightings is not None:
+            print(format_sightings(f.sightings, f.gap))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:
         raise SystemExit(f"error: {e}") from None
 

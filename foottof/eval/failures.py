@@ -47,6 +47,18 @@ GAP_PROBE_REACH_M = (0.04, 0.08, 0.12, 0.16, 0.2, 0.25, 0.3)
 GAP_STONE_STEP_M = 0.05  # terrain within this of the highest probed point counts as stone [m]
 
 
+def _stone_samples(h: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The stone rule of :func:`gap_direction` and :func:`stone_distance`, for heights ``h``
+    (N, ...) sampled around N feet: (stone: h within GAP_STONE_STEP_M of the highest sample of
+    its foot, same shape as ``h``; has_stone (N,): the samples span more than GAP_STONE_STEP_M,
+    else they are all pit or all flat ground and none is a stone)."""
+    flat = h.reshape(len(h), -1)
+    top = flat.max(axis=1)
+    has_stone = top - flat.min(axis=1) > GAP_STONE_STEP_M
+    stone = h > (top - GAP_STONE_STEP_M).reshape((-1,) + (1,) * (h.ndim - 1))
+    return stone, has_stone
+
+
 def gap_direction(foot_xy, height_at) -> np.ndarray:
     """(N,) index into GAP_DIRECTIONS of the gap around each foot.
 
@@ -63,11 +75,8 @@ def gap_direction(foot_xy, height_at) -> np.ndarray:
     r = np.asarray(GAP_PROBE_REACH_M)
     dirs = np.array([[1.0, 0.0], [-1.0, 0.0], [0.0, 1.0], [0.0, -1.0]])  # +x, -x, +y, -y
     pts = foot_xy[:, None, None, :] + dirs[None, :, None, :] * r[None, None, :, None]
-    h = np.asarray(height_at(pts), np.float64)  # (N, 4, R)
-    flat = h.reshape(len(foot_xy), -1)
-    top = flat.max(axis=1)
-    has_stone = top - flat.min(axis=1) > GAP_STONE_STEP_M  # else all pit (or all flat): open
-    stone = (h > (top - GAP_STONE_STEP_M)[:, None, None]).any(axis=2) & has_stone[:, None]
+    stone, has_stone = _stone_samples(np.asarray(height_at(pts), np.float64))  # (N, 4, R)
+    stone = stone.any(axis=2) & has_stone[:, None]  # else all pit (or all flat): open
     ahead_behind = stone[:, 0] & stone[:, 1]
     sides = stone[:, 2] & stone[:, 3]
     return np.select([ahead_behind & sides, ahead_behind, sides], [3, 0, 1], default=2).astype(
@@ -95,10 +104,9 @@ def stone_distance(foot_xy, height_at) -> np.ndarray:
     off = np.stack(np.meshgrid(u, u, indexing="ij"), axis=-1).reshape(-1, 2)
     r = np.linalg.norm(off, axis=-1)
     off, r = off[r <= RIM_REACH_M + 1e-9], r[r <= RIM_REACH_M + 1e-9]
-    h = np.asarray(height_at(foot_xy[:, None, :] + off[None]), np.float64)  # (N, P)
-    top = h.max(axis=1)
-    has_stone = top - h.min(axis=1) > GAP_STONE_STEP_M
-    stone = h > (top - GAP_STONE_STEP_M)[:, None]
+    stone, has_stone = _stone_samples(
+        np.asarray(height_at(foot_xy[:, None, :] + off[None]), np.float64)  # (N, P)
+    )
     dist = np.where(stone, r[None], np.inf).min(axis=1)
     return np.where(has_stone, dist, np.inf)
 

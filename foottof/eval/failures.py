@@ -259,18 +259,19 @@ def run(
     training_level: int | None = None,
 ):
     """With ``training_level`` None, on the evaluation ensemble (``cfg.eval``); else on the
-    training map of ``cfg`` (its stage, randomization and sensor degradation as in training), env
-    i on column i mod the map's columns at that curriculum level. ``checkpoint`` None: a fresh
-    init. Returns :class:`Failures`: the cause per env, terrain type name per env, end step,
-    progress at the end, the foot that went into the gap (index into constants.FEET, -1 where
-    the cause is not foot_stuck), the direction of that gap (index into GAP_DIRECTIONS, -1 where
-    not foot_stuck), that foot's distance to the nearest stone top before the last step
-    (:func:`stone_distance` [m], nan where not foot_stuck) and, with ``sight``, one (env, drop step, gap lead, look lead, own-sensor gap lead, stepped in from a
-    swing, teacher-input look lead, teacher-input gap lead) row per foot_stuck episode
-    (:func:`sighting_summary`; the own-sensor lead from the stuck foot's sensor alone; the
-    teacher-input leads from the env.actor_terrain sample points, :func:`scan_sightings`, whether
-    or not the policy reads them; for a seen teacher, env.actor_terrain_seen, only the points it
-    read as seen), else None."""
+    training map of ``cfg`` (its stage, randomization and sensor degradation as in training),
+    env i on column i mod the map's columns at that curriculum level. ``checkpoint`` None: a
+    fresh init. Returns :class:`Failures`: the cause per env, terrain type name per env, end
+    step, progress at the end, the foot that went into the gap (index into constants.FEET, -1
+    where the cause is not foot_stuck), the direction of that gap (index into GAP_DIRECTIONS, -1
+    where not foot_stuck), that foot's distance to the nearest stone top before the last step
+    (:func:`stone_distance` [m], nan where not foot_stuck) and, with ``sight``, one (env, drop
+    step, gap lead, look lead, own-sensor gap lead, stepped in from a swing, teacher-input look
+    lead, teacher-input gap lead) row per foot_stuck episode (:func:`sighting_summary`; the
+    own-sensor lead from the stuck foot's sensor alone; the teacher-input leads from the
+    env.actor_terrain sample points, :func:`scan_sightings`, whether or not the policy reads
+    them; for a seen teacher, env.actor_terrain_seen, only the points it read as seen), else
+    None."""
     import jax
     import jax.numpy as jp
 

@@ -430,8 +430,8 @@ def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn
     (16, 12) (input_growth.grow_width): saved blocks as saved, the new units' incoming weights
     as the fresh model's, zero weights from them (and from the new observation rows) into the
     saved units and the output, zero first Adam moments and second ones seeded at the saved
-    layer's mean; the actions are the saved model's, and one
-    iteration later the output layer has learned to read the new units."""
+    layer's mean; the actions are the saved model's, and one iteration later the output layer
+    has learned to read the new units."""
     env = toy_envs.make_memory_env(privileged=True)
     cfg = tiny_cfg()
     cfg.network.actor_hidden = (8, 6)

@@ -287,6 +287,8 @@ RULES = {
     "ppo.entropy_coef": _nonneg,
     "ppo.max_grad_norm": _pos,
     "ppo.normalize_advantage": _bool,
+    "ppo.low_noise_share": _num(0.0, 1.0, hi_open=True),
+    "ppo.low_noise_scale": _num(0.0, 1.0, lo_open=True),
     "network.policy": _choice(*POLICIES),
     "network.lstm_hidden_size": _int(1),
     "network.lstm_num_layers": _int(1),

@@ -52,6 +52,8 @@ ADDED_FIELDS = {
     "reward.scales.overspeed": 0.0,  # off: base speed is not penalized
     "reward.scales.timeout": 0.0,  # off: the deadline away from the goal costs nothing
     "reward.overspeed_mps": 0.6,  # read only when the overspeed term is on
+    "ppo.low_noise_share": 0.0,  # every env acts at the policy's std
+    "ppo.low_noise_scale": 0.25,  # read only when low_noise_share > 0
 }
 # Added fields that were already in the configs of the evaluations kept (results/): draw
 # fingerprints hash them at every value, as those evaluations did; ADDED_FIELDS gives only the

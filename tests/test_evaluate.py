@@ -114,7 +114,9 @@ def test_paired_cells_hand_checked():
     assert (row["successes_a"], row["successes_b"], row["a_only"], row["b_only"]) == (13, 4, 10, 1)
     assert row["p_value"] == pytest.approx(2 * (1 + 11) / 2048)  # 11 discordant, 1 the other way
     assert (row["falls_a"], row["falls_b"], row["episodes"]) == (5, 9, 18)
-    assert "McNemar" in paired.format_table([row])
+    # b: episode 9 and 11-14 neither succeed nor fall (18 = 4 successes + 9 falls + 5)
+    assert (row["timeouts_a"], row["timeouts_b"]) == (0, 5)
+    assert "McNemar" in paired.format_table([row]) and "timeouts" in paired.format_table([row])
     grid, gap = results.terrain_breakdown(a)  # even episodes grid stones, odd ones gaps
     # grid: successes at 0 2 4 6 8 16, falls at 10 12 14; gap: successes at 1 3 5 7 9 15 17
     assert (grid["terrain"], grid["episodes"], grid["successes"], grid["falls"]) == (

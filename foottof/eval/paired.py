@@ -43,6 +43,8 @@ PAIRED_KEYS = (  # CSV columns of --out
     "p_value",
     "falls_a",
     "falls_b",
+    "timeouts_a",  # neither a success nor a fall: the deadline away from the goal
+    "timeouts_b",
 )
 
 
@@ -123,7 +125,15 @@ def _pair_row(ca: dict, cb: dict, source: str) -> dict:
         "p_value": mcnemar_exact(a_only, b_only),
         "falls_a": sum(ca["failed"]),
         "falls_b": sum(cb["failed"]),
+        "timeouts_a": _timeouts(ca),
+        "timeouts_b": _timeouts(cb),
     }
+
+
+def _timeouts(cell: dict) -> int:
+    """Episodes of a cell that ended neither in a success nor in a fall (the deadline, or no end
+    within the rollout)."""
+    return sum(1 for s, f in zip(cell["success"], cell["failed"], strict=True) if not s and not f)
 
 
 def pair_cells(doc_a: dict, doc_b: dict, names=("a", "b")) -> list[dict]:
@@ -211,6 +221,7 @@ def format_table(rows: list[dict], names=("a", "b")) -> str:
     head = (
         f"{'source':<{w}}{'perturbation':<14}{'level':>7}{'n':>6}{a:>12}{b:>12}"
         f"{a + ' only':>12}{b + ' only':>12}{'McNemar p':>11}{'falls ' + a:>12}{'falls ' + b:>12}"
+        f"{'timeouts ' + a:>14}{'timeouts ' + b:>14}"
     )
     lines = [head, "-" * len(head)]
     for r in rows:
@@ -219,6 +230,7 @@ def format_table(rows: list[dict], names=("a", "b")) -> str:
             f"{r['source']:<{w}}{r['perturbation']:<14}{r['level']:>7.3g}{n:>6d}"
             f"{r['successes_a'] / n:>12.3f}{r['successes_b'] / n:>12.3f}{r['a_only']:>12d}"
             f"{r['b_only']:>12d}{r['p_value']:>11.3g}{r['falls_a']:>12d}{r['falls_b']:>12d}"
+            f"{r['timeouts_a']:>14d}{r['timeouts_b']:>14d}"
         )
     return "\n".join(lines)
 

@@ -198,22 +198,25 @@ class Settings:
         )
 
 
+def low_noise_envs(settings: Settings, n_local: int) -> np.ndarray:
+    """(n_local,) bool: the local envs that act at ``low_noise_scale`` x the policy's std, those
+    i where floor((i + 1) share) > floor(i share): floor(n_local x share) of them, spread evenly
+    over the index (so over the terrain types too), the same in every iteration."""
+    share = settings.low_noise_share
+    i = np.arange(n_local)
+    return np.floor((i + 1) * share) > np.floor(i * share)
+
+
 def low_noise_log_scale(settings: Settings, n_local: int) -> np.ndarray:
-    """(n_local,) log of each local env's action-std multiplier: the envs i where
-    floor((i + 1) share) > floor(i share) (floor(n_local x share) of them, spread evenly over the
-    index, so over the terrain types too) act at ``low_noise_scale`` x the policy's std, the
-    rest at its std (log 0). Static: the same envs in every iteration.
+    """(n_local,) log of each local env's action-std multiplier: log(low_noise_scale) on the
+    low_noise_envs, 0 (the policy's std) on the rest.
 
     Why: a policy whose sampled actions walk on may stand still under its mean action (the mean
     action is what a robot and evaluate.py run); the stall is invisible to PPO when no rollout
     acts near the mean. Those envs' actions, log-probs and ratios use the lower std, so PPO
     learns from them as from any behaviour policy that shares the mean."""
-    share = settings.low_noise_share
-    i = np.arange(n_local)
-    low = np.floor((i + 1) * share) > np.floor(i * share)
-    return np.where(low, math.log(settings.low_noise_scale) if share > 0 else 0.0, 0.0).astype(
-        np.float32
-    )
+    low = low_noise_envs(settings, n_local)
+    return np.where(low, math.log(settings.low_noise_scale), 0.0).astype(np.float32)
 
 
 # The functions of one iteration, each callable alone. Those that take a mesh axis (`local_*`,
@@ -444,14 +447,11 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
     # Each device gets its own rollout stream; the state key stays replicated.
     key_rollout = jax.random.fold_in(key_rollout, jax.lax.axis_index(AXIS))
     carry_start = state.carry  # stored initial carry of this rollout (before any reset)
-    log_scale = low_noise_log_scale(settings, state.prev_done.shape[0])  # static (N,)
+    low = settings.low_noise_share > 0  # static
+    n_local = state.prev_done.shape[0]
+    log_scale = low_noise_log_scale(settings, n_local) if low else None  # (N,)
     (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = rollout(
-        env,
-        networks,
-        state,
-        key_rollout,
-        settings.num_steps,
-        log_scale if settings.low_noise_share > 0 else None,
+        env, networks, state, key_rollout, settings.num_steps, log_scale
     )
     params, opt_state, normalizer, sgd_metrics = local_update(
         networks,
@@ -463,14 +463,9 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
         Batch(traj, carry_start, last_value),
         key_update,
     )
-    metrics = _iteration_metrics(
-        traj,
-        sgd_metrics,
-        networks.action_log_std(params),
-        params,
-        opt_state,
-        log_scale < 0 if settings.low_noise_share > 0 else None,
-    )
+    log_std = networks.action_log_std(params)
+    low_envs = low_noise_envs(settings, n_local) if low else None
+    metrics = _iteration_metrics(traj, sgd_metrics, log_std, params, opt_state, low_envs)
     new_state = TrainState(
         params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
         carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
@@ -642,6 +637,7 @@ __all__ = [
     "epoch_minibatches",
     "init_state",
     "local_iteration",
+    "low_noise_envs",
     "low_noise_log_scale",
     "local_update",
     "make_train",

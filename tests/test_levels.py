@@ -296,6 +296,35 @@ def test_sighting_summary_counts_steps_before_the_drop():
     assert sighting_summary(long_z, 0.0, len(long_z) - 1, early, early) == (60, -1, -1, False)
 
 
+def test_stall_step_hand_worked():
+    """foottof.eval.failures.stall_step: a base walking 0.03 m per step along x until step 100,
+    then standing until step 199. A 50-step window starting at t moved 0.03 (100 - t) m there:
+    >= 0.1 m up to t = 96, so it stands from step 97. Standing only the last 30 steps, or
+    walking to the end, is no stall; nor is an episode shorter than a window."""
+    from foottof.eval.failures import format_stalls, stall_step
+
+    x = 0.03 * np.minimum(np.arange(200), 100)
+    xy = np.stack([x, np.zeros(200)], axis=-1)
+    assert stall_step(xy, 199) == 97
+    assert stall_step(xy, 130) == -1  # stood 30 steps before the end: under one window
+    assert stall_step(xy, 150) == 97  # stood steps 97-150: more than one window
+    walking = np.stack([0.03 * np.arange(200), np.zeros(200)], axis=-1)
+    assert stall_step(walking, 199) == -1
+    assert stall_step(np.zeros((200, 2)), 199) == 0  # never moved
+    assert stall_step(np.zeros((200, 2)), 30) == -1  # shorter than a window
+    wobble = xy + 0.04 * np.stack([np.sin(np.arange(200)), np.cos(np.arange(200))], -1)
+    assert 95 <= stall_step(wobble, 199) <= 100  # a 4 cm sway in place is standing
+    cause = np.array([4, 4, 0, 4])  # three timeouts, one success
+    stall = np.array([97, -1, -1, 147])
+    text = format_stalls(
+        cause, stall, np.array([0.5, np.nan, np.nan, 0.7]), np.full(4, 199),
+        ["grid_stones", "grid_stones", "grid_stones", "platform_gap"], 0.02,
+    )  # fmt: skip
+    assert "timeout, all (3): stood still 2 (from a median step 122, 2.4 s in and 1.5 s" in text
+    assert "progress 0.60), walked on to the deadline 1" in text
+    assert "timeout, grid_stones (2): stood still 1" in text
+
+
 def test_failures_on_the_training_map_cover_every_column_type():
     """foottof.eval.failures.run with training_level: the stage-2 training map of the config
     (not the evaluation ensemble), env i on column i; the column types come from
@@ -315,6 +344,9 @@ def test_failures_on_the_training_map_cover_every_column_type():
     assert {"beam", "stairs", "pyramid_up", "pyramid_down"} <= set(types)
     assert cause.shape == f.end_step.shape == f.progress.shape == rim.shape == (9,)
     assert f.sightings is None
+    timeout = cause == CAUSES.index("timeout")
+    assert f.stall.shape == f.stall_progress.shape == (9,) and (f.stall[~timeout] == -1).all()
+    assert np.isnan(f.stall_progress[f.stall < 0]).all()
     stuck = cause == CAUSES.index("foot_stuck")
     assert np.isnan(rim[~stuck]).all() and not np.isnan(rim[stuck]).any()
     assert set(cause.tolist()) <= set(range(len(CAUSES)))

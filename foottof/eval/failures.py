@@ -30,6 +30,11 @@ episode, did any foot sensor's ray look at the spot where the foot went in durin
 before it dropped below the stone tops, and did that ray see a gap there (:func:`sightings`)?
 A spot never looked at is a limit of the sensor's coverage; one seen as a gap and stepped into
 anyway is a limit of the policy.
+
+For each ``timeout`` it says whether the robot stood still before the deadline
+(:func:`stall_step`: the base within STALL_DIST_M over every STALL_WINDOW_STEPS from then on)
+and, if so, when and how far along the course it stopped: a policy that stops (its mean action
+settles) rather than one that walks too slowly.
 """
 
 from __future__ import annotations
@@ -38,6 +43,8 @@ import argparse
 from typing import NamedTuple
 
 import numpy as np
+
+from foottof.constants import CONTROL_DT_S
 
 CAUSES = ("success", "foot_stuck", "fell_base_low", "other_fall", "timeout")
 GAP_DIRECTIONS = ("crossing", "along", "junction", "hole")
@@ -114,6 +121,8 @@ def stone_distance(foot_xy, height_at) -> np.ndarray:
 SIGHT_RADIUS_M = 0.08  # a ray looked at a spot when it crossed the stone-top plane this near [m]
 SIGHT_BEYOND_M = 0.05  # ... and saw a gap there when it hit this far beyond the plane, or nothing
 SIGHT_WINDOW_STEPS = 50  # how far back before the foot dropped to look for sightings (1 s)
+STALL_WINDOW_STEPS = 50  # stall_step: a window of 1 s ...
+STALL_DIST_M = 0.1  # ... in which the base moved less than this counts as standing still [m]
 SWING_LOOKBACK_STEPS = 10  # a foot stepped in when it was in the air in the 0.2 s before the drop
 SWING_LIFT_M = 0.02  # ... with its bottom this far above the stone tops (else it slid off) [m]
 
@@ -199,6 +208,27 @@ def sighting_summary(foot_z, top_z, end_step, looked, gap) -> tuple[int, int, in
     return drop, lead(gap), lead(looked), swung
 
 
+def stall_step(
+    base_xy: np.ndarray,
+    end: int,
+    window: int = STALL_WINDOW_STEPS,
+    dist: float = STALL_DIST_M,
+) -> int:
+    """The step from which the base stood still until ``end``: the first s such that no window
+    of ``window`` steps starting in [s, end - window] moved the base ``dist`` or more
+    (|xy[t + window] - xy[t]|); -1 where the last such move leaves less than one window before
+    ``end`` (it did not stand still for a whole window).
+
+    Args:
+      base_xy: (T, 2) base position per step [m]; end: the episode's last step (< T)."""
+    xy = np.asarray(base_xy, np.float64)[: end + 1]
+    if end < window:
+        return -1
+    moved = np.linalg.norm(xy[window:] - xy[:-window], axis=-1) >= dist  # (end + 1 - window,)
+    start = int(np.nonzero(moved)[0][-1]) + 1 if moved.any() else 0
+    return start if start <= end - window else -1
+
+
 def classify(done, success, failed, stuck, base_z) -> np.ndarray:
     """(E,) cause index into CAUSES of each env's first episode, from (T, E) step records; an
     env whose episode did not end within T steps counts as a timeout."""
@@ -248,6 +278,8 @@ class Failures(NamedTuple):
     gap: np.ndarray  # (N,) index into GAP_DIRECTIONS of that gap; -1: not foot_stuck
     rim: np.ndarray  # (N,) that foot's distance to the nearest stone top [m]; nan: not foot_stuck
     sightings: list | None  # one row per foot_stuck episode (sighting_summary), or None
+    stall: np.ndarray  # (N,) stall_step of a timeout; -1: not a timeout, or it did not stand
+    stall_progress: np.ndarray  # (N,) progress at that step [-]; nan where stall is -1
 
 
 def run(
@@ -326,6 +358,7 @@ def run(
             m = s2.metrics
             rec = (s2.done, m["episode/success"], m["episode/failed"], m["episode/foot_stuck"])
             rec += (s.pipeline_state.qpos[:, 2], m["episode/progress"], s.info["task"].col)
+            rec += (s.pipeline_state.qpos[:, :2],)
             rec += jax.vmap(feet)(s.pipeline_state.qpos)  # before the step that ends it
             if sight and seen_teacher:  # static: the flags the seen teacher read at this step
                 origin, grid = s.info[SEEN_KEY]
@@ -336,7 +369,7 @@ def run(
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
         return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
 
-    done, succ, fail, stuck, base_z, prog, col, foot_pos, depth, *rays = (
+    done, succ, fail, stuck, base_z, prog, col, base_xy, foot_pos, depth, *rays = (
         np.asarray(x) for x in jax.device_get(rollout(state))
     )
     cause = classify(done, succ, fail, stuck, base_z)
@@ -377,7 +410,11 @@ def run(
                 foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap
             )[1:3]
             rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung, scan_look, scan_gap))
-    return Failures(cause, [TERRAIN_TYPES[i] for i in types], t, prog[t, e], foot, gap, rim, rows)
+    timeout = cause == CAUSES.index("timeout")
+    stall = np.array([stall_step(base_xy[:, i], t[i]) if timeout[i] else -1 for i in e])
+    stall_prog = np.where(stall >= 0, prog[np.maximum(stall, 0), e], np.nan)
+    types = [TERRAIN_TYPES[i] for i in types]
+    return Failures(cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog)
 
 
 def format_sightings(rows, gap) -> str:
@@ -461,6 +498,29 @@ def format_rims(rim: np.ndarray, gap: np.ndarray) -> str:
     return "\n".join(lines)
 
 
+def format_stalls(cause, stall, stall_progress, end_step, types, step_s: float) -> str:
+    """One line per terrain type with timeouts (and one for all): how many stood still before
+    the deadline, from a median step (seconds into the episode and before its end) at a median
+    progress, and how many walked on to the deadline."""
+    timeout = cause == CAUSES.index("timeout")
+    lines = []
+    for name in sorted({t for t, x in zip(types, timeout, strict=True) if x}) + ["all"]:
+        sel = timeout & np.array([name in ("all", t) for t in types])
+        if not sel.any():
+            continue
+        still = sel & (stall >= 0)
+        line = f"timeout, {name} ({int(sel.sum())}): stood still {int(still.sum())}"
+        if still.any():
+            at, left = stall[still], end_step[still] - stall[still]
+            line += (
+                f" (from a median step {np.median(at):.0f}, {np.median(at) * step_s:.1f} s in and "
+                f"{np.median(left) * step_s:.1f} s before the end, progress "
+                f"{np.median(stall_progress[still]):.2f})"
+            )
+        lines.append(line + f", walked on to the deadline {int((sel & (stall < 0)).sum())}")
+    return "\n".join(lines)
+
+
 def format_table(cause, types, end_step, progress) -> str:
     lines = [
         "| terrain | episodes | " + " | ".join(CAUSES) + " |",
@@ -517,6 +577,7 @@ def main(argv=None) -> None:
         print(format_feet(f.foot))
         print(format_gaps(f.gap, f.types))
         print(format_rims(f.rim, f.gap))
+        print(format_stalls(f.cause, f.stall, f.stall_progress, f.end_step, f.types, CONTROL_DT_S))
         if f.sightings is not None:
             print(format_sightings(f.sightings, f.gap))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:

@@ -325,6 +325,23 @@ def test_stall_step_hand_worked():
     assert "timeout, grid_stones (2): stood still 1" in text
 
 
+def test_start_step_hand_worked():
+    """foottof.eval.failures.start_step and format_starts: progress 0.05 per step from step 2 in
+    env 0 (0.1 at step 4), never past 0.08 in env 1, 0.1 at step 6 in env 2 but that episode
+    ended at step 5."""
+    from foottof.eval.failures import format_starts, start_step
+
+    t = np.arange(10)[:, None]
+    progress = np.concatenate(
+        [np.maximum(0, t - 2) * 0.05, np.minimum(t * 0.01, 0.08), (t >= 6) * 0.2], axis=1
+    )
+    start = start_step(progress, np.array([9, 9, 5]))
+    np.testing.assert_array_equal(start, [4, -1, -1])
+    assert start_step(progress, np.array([9, 9, 9]))[2] == 6
+    text = format_starts(np.array([0, 4, 4]), np.array([4, -1, 10]), 0.5)
+    assert text == "time to progress 0.1, median: success 2.0 s (0 never), timeout 5.0 s (1 never)"
+
+
 def test_failures_on_the_training_map_cover_every_column_type():
     """foottof.eval.failures.run with training_level: the stage-2 training map of the config
     (not the evaluation ensemble), env i on column i; the column types come from
@@ -347,6 +364,7 @@ def test_failures_on_the_training_map_cover_every_column_type():
     timeout = cause == CAUSES.index("timeout")
     assert f.stall.shape == f.stall_progress.shape == (9,) and (f.stall[~timeout] == -1).all()
     assert np.isnan(f.stall_progress[f.stall < 0]).all()
+    assert f.start.shape == (9,) and (f.start < f.end_step + 1).all()
     stuck = cause == CAUSES.index("foot_stuck")
     assert np.isnan(rim[~stuck]).all() and not np.isnan(rim[stuck]).any()
     assert set(cause.tolist()) <= set(range(len(CAUSES)))

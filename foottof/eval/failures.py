@@ -34,7 +34,9 @@ anyway is a limit of the policy.
 For each ``timeout`` it says whether the robot stood still before the deadline
 (:func:`stall_step`: the base within STALL_DIST_M over every STALL_WINDOW_STEPS from then on)
 and, if so, when and how far along the course it stopped: a policy that stops (its mean action
-settles) rather than one that walks too slowly.
+settles) rather than one that walks too slowly. And for every cause, how long the robot took to
+get going: the median step at which its progress first reached START_PROGRESS (a late start
+eats the slack a 10 s episode leaves).
 """
 
 from __future__ import annotations
@@ -123,6 +125,7 @@ SIGHT_BEYOND_M = 0.05  # ... and saw a gap there when it hit this far beyond the
 SIGHT_WINDOW_STEPS = 50  # how far back before the foot dropped to look for sightings (1 s)
 STALL_WINDOW_STEPS = 50  # stall_step: a window of 1 s ...
 STALL_DIST_M = 0.1  # ... in which the base moved less than this counts as standing still [m]
+START_PROGRESS = 0.1  # the robot has got going once its progress reached this [-]
 SWING_LOOKBACK_STEPS = 10  # a foot stepped in when it was in the air in the 0.2 s before the drop
 SWING_LIFT_M = 0.02  # ... with its bottom this far above the stone tops (else it slid off) [m]
 
@@ -229,6 +232,29 @@ def stall_step(
     return start if start <= end - window else -1
 
 
+def start_step(progress: np.ndarray, end: np.ndarray, reach: float = START_PROGRESS) -> np.ndarray:
+    """(E,) the first step of each env's episode at which its progress reached ``reach``; -1
+    where it did not by its last step ``end`` (E,). progress: (T, E)."""
+    p = np.asarray(progress)
+    within = np.arange(p.shape[0])[:, None] <= np.asarray(end)[None]
+    got = (p >= reach) & within
+    return np.where(got.any(axis=0), np.argmax(got, axis=0), -1)
+
+
+def format_starts(cause, start, step_s: float) -> str:
+    """One line: per cause, the median time the robot took to reach START_PROGRESS, over the
+    episodes that reached it, and how many did not."""
+    parts = []
+    for i, name in enumerate(CAUSES):
+        sel = cause == i
+        if not sel.any():
+            continue
+        got = sel & (start >= 0)
+        med = f"{np.median(start[got]) * step_s:.1f} s" if got.any() else "-"
+        parts.append(f"{name} {med} ({int((sel & (start < 0)).sum())} never)")
+    return f"time to progress {START_PROGRESS:g}, median: " + ", ".join(parts)
+
+
 def classify(done, success, failed, stuck, base_z) -> np.ndarray:
     """(E,) cause index into CAUSES of each env's first episode, from (T, E) step records; an
     env whose episode did not end within T steps counts as a timeout."""
@@ -280,6 +306,7 @@ class Failures(NamedTuple):
     sightings: list | None  # one row per foot_stuck episode (sighting_summary), or None
     stall: np.ndarray  # (N,) stall_step of a timeout; -1: not a timeout, or it did not stand
     stall_progress: np.ndarray  # (N,) progress at that step [-]; nan where stall is -1
+    start: np.ndarray  # (N,) first step with progress >= START_PROGRESS; -1: never in the episode
 
 
 def run(
@@ -414,7 +441,8 @@ def run(
     stall = np.array([stall_step(base_xy[:, i], t[i]) if timeout[i] else -1 for i in e])
     stall_prog = np.where(stall >= 0, prog[np.maximum(stall, 0), e], np.nan)
     types = [TERRAIN_TYPES[i] for i in types]
-    return Failures(cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog)
+    start = start_step(prog, t)
+    return Failures(cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog, start)
 
 
 def format_sightings(rows, gap) -> str:
@@ -578,6 +606,7 @@ def main(argv=None) -> None:
         print(format_gaps(f.gap, f.types))
         print(format_rims(f.rim, f.gap))
         print(format_stalls(f.cause, f.stall, f.stall_progress, f.end_step, f.types, CONTROL_DT_S))
+        print(format_starts(f.cause, f.start, CONTROL_DT_S))
         if f.sightings is not None:
             print(format_sightings(f.sightings, f.gap))
     except (FileNotFoundError, ValueError, CheckpointUnreadable) as e:

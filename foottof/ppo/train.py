@@ -422,7 +422,11 @@ def local_update(
         carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
         log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(params),
         values=traj.values, advantages=advantages, returns=returns,
-        log_scale=jp.asarray(low_noise_log_scale(settings, traj.rewards.shape[1])),
+        log_scale=(  # static: a scalar 0 (every env at the std) unless a share is set
+            jp.asarray(low_noise_log_scale(settings, traj.rewards.shape[1]))
+            if settings.low_noise_share > 0
+            else 0.0
+        ),
     )  # fmt: skip
     sgd = functools.partial(sgd_step, networks, optimizer, settings)
     (new_params, opt_state, _), sgd_metrics = jax.lax.scan(

@@ -369,7 +369,7 @@ def epoch_minibatches(data: losses.Minibatch, key, num_minibatches: int) -> loss
       log_std (M, A)); every env in exactly one minibatch.
     """
     n_local = data.advantages.shape[1]
-    log_scale = jp.broadcast_to(jp.asarray(data.log_scale, jp.float32), (n_local,))
+    log_scale = jp.asarray(data.log_scale, jp.float32)  # () for all envs, or (N,) per env
     perm = jax.random.permutation(key, n_local)  # shuffle envs, keep time order
     idx = perm.reshape(num_minibatches, n_local // num_minibatches)
 
@@ -380,7 +380,7 @@ def epoch_minibatches(data: losses.Minibatch, key, num_minibatches: int) -> loss
             resets=data.resets[:, i], actions=data.actions[:, i],
             log_probs=data.log_probs[:, i], means=data.means[:, i], log_std=data.log_std,
             values=data.values[:, i], advantages=data.advantages[:, i],
-            returns=data.returns[:, i], log_scale=log_scale[i],
+            returns=data.returns[:, i], log_scale=log_scale[i] if log_scale.ndim else log_scale,
         )  # fmt: skip
 
     minibatches = jax.vmap(take)(idx)  # leading minibatch axis

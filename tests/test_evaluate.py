@@ -159,7 +159,18 @@ def test_paired_cli_bad_input_and_output(tmp_path, capsys):
         (tmp_path / name / "episodes_tof_none.json").write_text(json.dumps(doc))
     out = tmp_path / "paired.csv"
     paired.main([f"old={tmp_path / 'a'}", f"new={tmp_path / 'b'}", "--out", str(out)])
-    assert "old only" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "old only" in printed and "actions:" not in printed  # none recorded: no line
+    cfg = smoke.get_config()
+    for name, det in (("a", True), ("b", False)):  # how each acted, from its results file
+        cfg.eval.deterministic, cfg.network.max_noise_std = det, 0.15
+        doc = results.results_document([_row("tof", "none", 0.0, 1, n=2)], None, 10.0,
+                                       results.ensemble_setting(cfg))  # fmt: skip
+        results.write_results(str(tmp_path / name), "tof", "none", doc)
+    assert paired.actions_of(str(tmp_path / "a")) == "mean actions"
+    paired.main([f"old={tmp_path / 'a'}", f"new={tmp_path / 'b'}"])
+    printed = capsys.readouterr().out
+    assert "actions: old mean actions, new sampled actions (std capped at 0.15)" in printed
     (row,) = list(csv.DictReader(out.open()))
     assert tuple(row) == paired.PAIRED_KEYS and (row["a_only"], row["b_only"]) == ("1", "0")
 
@@ -473,6 +484,50 @@ def test_rollout_acts_with_the_mean_or_samples_at_the_capped_std(deterministic):
         np.testing.assert_allclose(acted, acted[0], atol=1e-6)
     else:
         assert np.std(acted) == pytest.approx(0.3, rel=0.08)
+
+
+class _DrawingEnv(_ConstantObsEnv):
+    """_ConstantObsEnv whose reset draws the terrain column from its key and whose steps draw
+    from an rng carried in the state (as the real env's noise): at an episode's last step
+    'episode/speed_mps' reads that draw instead of the action."""
+
+    def reset(self, key):
+        state = super().reset(key)
+        info = dict(state.info, task=_Task(jax.random.randint(key, (), 0, 1000)), rng=key)
+        return state.replace(info=info)
+
+    def step(self, state, action):
+        rng, sub = jax.random.split(state.info["rng"])
+        out = super().step(state, action)
+        speed = jp.where(out.done > 0.5, jax.random.uniform(sub), 0.0)
+        metrics = dict(out.metrics, **{"episode/speed_mps": speed})
+        return out.replace(metrics=metrics, info=dict(out.info, rng=rng))
+
+
+def test_mean_and_sampled_actions_run_the_same_draws():
+    """What lets paired compare a policy's mean with its sampled actions: the rollout's reset
+    and env draws do not depend on how it acts (the action keys are split off), and the draws
+    fingerprint is the same for both; another key draws other episodes."""
+    cfg = tiny_cfg()
+    env = _DrawingEnv()
+    networks, params, normalizer = harness.load_policy(
+        cfg, env, jp.zeros((1, 3)), None, jax.random.PRNGKey(0)
+    )
+    got = {}
+    for det, seed in ((True, 1), (False, 1), (True, 2)):
+        rollout = rb.make_rollout(env, networks, 64, 8, deterministic=det)
+        (_, _, _, speed), col = jax.device_get(
+            rollout(params, normalizer, jax.random.PRNGKey(seed), 0.0)
+        )
+        got[det, seed] = (col, speed)
+    for a, b in zip(got[True, 1], got[False, 1], strict=True):
+        np.testing.assert_array_equal(a, b)
+    assert (got[True, 2][0] != got[True, 1][0]).mean() > 0.9
+    sampled = tiny_cfg()
+    sampled.eval.deterministic, sampled.network.max_noise_std = False, 0.15
+    assert results.episode_draws(sampled) == results.episode_draws(cfg)
+    e_mean, e_sampled = results.ensemble_setting(cfg), results.ensemble_setting(sampled)
+    assert e_mean != e_sampled  # a figure still draws only results that acted alike
 
 
 # ---------------------------------------------------------------------------------------------

@@ -148,6 +148,9 @@ def test_draw_fingerprint_is_kept_across_the_rename():
     cfg.eval.num_envs, cfg.eval.seed, cfg.eval.episodes = 200, 4242, 200
     cfg.eval.difficulty_fraction = 0.125
     assert results.episode_draws(cfg) == doc["draws"]
+    cfg.eval.deterministic, cfg.network.max_noise_std = False, 0.15  # sampled: the same draws
+    assert results.episode_draws(cfg) == doc["draws"]
+    cfg.eval.deterministic = True
     cfg.terrain.stretch_prob = 0.2  # an added field counts away from its old-behaviour default
     assert results.draws_fingerprint(cfg) != doc["draws"]["fingerprint"]
     cfg.terrain.stretch_prob = 0.0

@@ -7,7 +7,8 @@ episode, and prints per cell: the successes of each, the discordant episodes (su
 only) and the exact two-sided McNemar p-value (a binomial test of the discordant episodes at
 1/2). Evaluations pair only when they ran the same draws: the same ``eval.seed``, batch size,
 episode count and config fingerprint (``results.draws_fingerprint``); anything else is an error
-that names what differs.
+that names what differs. Mean and sampled actions of the same draws pair (one line before the
+table names how each acted when they differ).
 
 ``python -m foottof.eval.paired --figure OUT_DIR [--out FILE.csv]`` pairs sources instead, within
 one robustness-figure folder (every source there ran the same draws): per panel, ``tof`` against
@@ -215,6 +216,24 @@ def pair_folders(dir_a: str, dir_b: str, names=("a", "b")) -> list[dict]:
     return rows
 
 
+def actions_of(out_dir: str) -> str | None:
+    """How an evaluation folder's policy acted, from its results files' "ensemble" ('mean
+    actions' or 'sampled actions (std capped at S)'); None when no file records it. Mean and
+    sampled evaluations of the same draws pair (results.draws_fingerprint)."""
+    seen = set()
+    for path in sorted(glob.glob(os.path.join(out_dir, "results_*.json"))):
+        with open(path) as f:
+            ens = results.migrate_ensemble(json.load(f).get("ensemble"))
+        if isinstance(ens, dict) and "deterministic" in ens:
+            cap = ens.get("action_std_cap")
+            seen.add(
+                "mean actions"
+                if ens["deterministic"]
+                else "sampled actions" + (f" (std capped at {cap:g})" if cap else "")
+            )
+    return "; ".join(sorted(seen)) or None
+
+
 def format_table(rows: list[dict], names=("a", "b")) -> str:
     a, b = names
     w = max([11] + [len(r["source"]) + 2 for r in rows])
@@ -257,6 +276,11 @@ def main(argv=None) -> None:
             (na, da), (nb, db) = parse_branch(args.a), parse_branch(args.b)
             names = (na, nb)
             rows = pair_folders(da, db, names)
+            acts = (actions_of(da), actions_of(db))
+            if acts[0] != acts[1]:  # say what is compared when the policies acted differently
+                print(
+                    f"actions: {na} {acts[0] or 'not recorded'}, {nb} {acts[1] or 'not recorded'}"
+                )
     except (ValueError, FileNotFoundError) as e:
         raise SystemExit(f"error: {e}") from None
     print(format_table(rows, names))

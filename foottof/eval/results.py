@@ -175,12 +175,18 @@ def draws_fingerprint(cfg) -> str:
     """sha256 (16 hex digits) of the config leaves that decide an evaluation's episode draws
     and outcomes (DRAW_SECTIONS): two evaluations with equal fingerprints, seeds, batch sizes and
     episode counts ran the same episodes, so their outcomes pair episode by episode. Renamed
-    fields are hashed under their old names (foottof.renames): a rename keeps the fingerprint."""
+    fields are hashed under their old names (foottof.renames): a rename keeps the fingerprint.
+    ``eval.deterministic`` is hashed as True: mean and sampled actions of one policy pair."""
     d = {k: cfg[k].to_dict() if hasattr(cfg[k], "to_dict") else cfg[k] for k in DRAW_SECTIONS}
     d = renames.legacy_config_dict(d)  # renamed fields hash under their first names
     d["eval"] = dict(d["eval"])
     for k in _NOT_DRAW_EVAL_KEYS:
         d["eval"].pop(k, None)
+    if "deterministic" in d["eval"]:
+        # Mean or sampled actions is the policy's choice, not a draw (the action keys are split
+        # off the reset keys in robustness.make_rollout): hashed as mean actions, so a sampled
+        # evaluation pairs with a mean one and mean-action fingerprints are as before.
+        d["eval"]["deterministic"] = True
     d["env"] = dict(d["env"])
     for k in _NOT_DRAW_ENV_KEYS:
         d["env"].pop(k, None)

@@ -10,6 +10,7 @@ from configs import _reward, smoke
 from foottof import constants
 from foottof.envs import make_env
 from foottof.envs import rewards as rw
+from foottof.envs.anymal_tof import FAIL_REASONS
 from foottof.terrain import TERRAIN_TYPES
 
 NUM_ENVS = len(TERRAIN_TYPES)  # one env per column: every terrain type is covered
@@ -134,15 +135,32 @@ def test_robot_dropped_into_gap_terminates(env, fns):
     qpos = state.pipeline_state.qpos
     qpos = qpos.at[0, 0:3].set(jp.array([x, y, env._stand_height + 0.05]))
     state = state.replace(pipeline_state=state.pipeline_state.replace(qpos=qpos))
+    task = state.info["task"]  # every env is pushed at its 3rd step (a draw of the step's keys)
+    params = task.params.replace(push_step=jp.full_like(task.params.push_step, 2))
+    state = state.replace(info=dict(state.info, task=task.replace(params=params)))
     failed = False
+    physics = jax.jit(jax.vmap(env.step_physics))
+    reasons = jax.jit(jax.vmap(env.fail_reasons))
+    action = jp.zeros((NUM_ENVS, 12))
     for _ in range(40):  # 0.8 s of free fall is enough to drop > 1 m
-        state = step(state, jp.zeros((NUM_ENVS, 12)))
+        d_end, diverged = physics(state, action)  # the pose this step reaches, before a reset
+        before = state
+        state = step(state, action)
+        going = np.asarray(state.done) < 0.5
+        np.testing.assert_array_equal(  # step_physics is the step's own physics
+            np.asarray(d_end.qpos)[going], np.asarray(state.pipeline_state.qpos)[going]
+        )
         if float(state.metrics["episode/failed"][0]) > 0:
             failed = True
             break
     assert failed
     assert float(state.done[0]) == 1.0
     assert float(state.info["truncation"][0]) == 0.0
+    # Why: the feet or the base went down into the pit, not a contact, flip or divergence.
+    why = {k: bool(v[0]) for k, v in reasons(d_end).items()}
+    assert sorted(why) == sorted(FAIL_REASONS) and not bool(diverged[0])
+    assert (why["fell"] or why["foot_deep"]) and not (why["body_contact"] or why["flipped"])
+    assert not any(bool(v[0]) for v in reasons(before.pipeline_state).values())  # the step before
 
 
 @pytest.mark.parametrize("offset_m,expect", [(0.4, True), (0.6, False)])

@@ -348,7 +348,7 @@ def test_failures_on_the_training_map_cover_every_column_type():
     allocate_columns of the stage's weights. A level outside the map is refused, naming the
     range."""
     from configs import smoke
-    from foottof.eval.failures import CAUSES, run
+    from foottof.eval.failures import CAUSES, REASONS, format_reasons, run
 
     cfg = smoke.get_config()
     cfg.stage = 2
@@ -368,5 +368,22 @@ def test_failures_on_the_training_map_cover_every_column_type():
     stuck = cause == CAUSES.index("foot_stuck")
     assert np.isnan(rim[~stuck]).all() and not np.isnan(rim[stuck]).any()
     assert set(cause.tolist()) <= set(range(len(CAUSES)))
+    assert f.reasons.shape == (9, len(REASONS)) and f.reasons.dtype == bool
+    fell = np.isin(cause, [CAUSES.index(c) for c in ("foot_stuck", "fell_base_low", "other_fall")])
+    assert not f.reasons[~fell].any()  # reasons only where the episode failed
+    assert f.reasons[fell].any(axis=1).all()  # every failure has one
+    assert (f.reasons[:, REASONS.index("foot_stuck")] == stuck).all()
     with pytest.raises(ValueError, match=r"training level 2 outside the map's levels \[0, 1\]"):
         run(cfg, None, 9, 3, training_level=2)
+    # A base contact margin above the standing height: every episode fails on its first step
+    # by touching the terrain, and by nothing else (the robot stands upright on its platform).
+    cfg.env.body_contact_margin_m = 1.0
+    f = run(cfg, None, 9, 3, training_level=0)
+    assert (f.end_step == 0).all() and (f.cause == CAUSES.index("other_fall")).all()
+    assert f.reasons[:, REASONS.index("body_contact")].all()
+    assert f.reasons.sum(axis=1).tolist() == [1] * 9
+    lines = format_reasons(f.cause, f.types, f.reasons).splitlines()
+    assert lines[-1] == (
+        "other_fall reasons, all (9): body_contact 9, fell 0, foot_deep 0, foot_stuck 0, "
+        "flipped 0, diverged 0"
+    )

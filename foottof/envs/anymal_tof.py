@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import NamedTuple
 
@@ -52,6 +53,11 @@ STEP_METRICS = ("task/speed_mps", "task/feet_at_edges", "task/guidance_weight")
 # State.info key of each env's control steps since training began (only where the guidance bias
 # decays, reward.guidance_decay_end_iteration > 0); checkpointed with the env state.
 ENV_STEPS_KEY = "env_steps"
+# Why an episode failed (AnymalToF.fail_reasons; any of them ends it, and so does divergence):
+# the base (or a knee, with env.knee_contact_terminates) touches the terrain, the base fell below
+# the pit floor + env.fall_height_above_floor_m, a foot went below env.foot_fall_z_m, a foot is
+# stuck in a gap (env.foot_stuck_depth_m), the base tilted beyond env.max_tilt_deg.
+FAIL_REASONS = ("body_contact", "fell", "foot_deep", "foot_stuck", "flipped")
 SEEN_KEY = "seen"  # State.info: (origin, grid) of the ray-hit cells (env.actor_terrain_seen)
 
 
@@ -215,7 +221,7 @@ class AnymalToFEnv(Env):
         rewards, auto-reset (curriculum update on the finished episode), then sensing and
         observations of the selected state."""
         task: TaskState = state.info["task"]
-        rng, key_push, key_reset, key_obs = jax.random.split(task.rng, 4)
+        rng, key_push, key_reset, key_obs = self._step_keys(task)
         d, action, taus, diverged = self._act_and_simulate(
             state.pipeline_state, task, action, key_push
         )
@@ -272,8 +278,23 @@ class AnymalToFEnv(Env):
             info=info,
         )
 
+    def step_physics(self, state: State, action: jax.Array):
+        """(physics state, diverged) that :meth:`step` reaches from ``state`` with ``action``
+        before its auto-reset: the pose an ending episode ended in (``fail_reasons`` of it says
+        why; the failures tool). The same push and physics as the step, so the same pose."""
+        task: TaskState = state.info["task"]
+        d, _, _, diverged = self._act_and_simulate(
+            state.pipeline_state, task, action, self._step_keys(task)[1]
+        )
+        return d, diverged
+
     # ----------------------------------------------------------------------------------------
     # Step phases
+    @staticmethod
+    def _step_keys(task: TaskState):
+        """(next rng, push, reset, observation) keys of one step, split off the task's rng."""
+        return jax.random.split(task.rng, 4)
+
     def _act_and_simulate(self, d, task: TaskState, action, key_push):
         """Clipped action -> joint targets, the episode's push, the physics step; a diverged
         simulation (non-finite or absurd velocities) is flagged and sanitized so that no inf/NaN
@@ -433,9 +454,24 @@ class AnymalToFEnv(Env):
         return fk, qvel[0:3] + jp.cross(omega_w, lever) + dfk.foot_pos
 
     def _failed(self, d, gravity, fk: kinematics.FootKinematics):
-        """Failure (base touches the terrain, falls into a gap, a foot stuck in a gap, bad
-        orientation; knee contact too if ``env.knee_contact_terminates``), (4,) knee contacts
-        (1.0 where a knee touches) and whether a foot is stuck (``foot_stuck``, its own reason)."""
+        """Failure (any of :meth:`fail_reasons`), (4,) knee contacts (1.0 where a knee touches)
+        and whether a foot is stuck (``foot_stuck``, its own reason)."""
+        reasons, knee_contact = self._fail_reasons(d, gravity, fk)
+        failed = functools.reduce(jp.logical_or, reasons.values())
+        return failed, knee_contact.astype(jp.float32), reasons["foot_stuck"]
+
+    def fail_reasons(self, d) -> dict:
+        """{reason: () bool} for the physics state ``d`` after a step, keyed by FAIL_REASONS (a
+        jitted call returns the keys sorted): which of the failure terminations hold there (the episode fails where any does; a
+        diverged simulation fails too, flagged by the step itself)."""
+        kin = self._step_kinematics(d)
+        return self._fail_reasons(d, kin.gravity, kin.fk)[0]
+
+    def _fail_reasons(self, d, gravity, fk: kinematics.FootKinematics):
+        """({reason: () bool} in FAIL_REASONS order, (4,) bool knee contacts): the base touches
+        the terrain (knee contact too if ``env.knee_contact_terminates``), the base fell into a
+        gap, a foot went below ``env.foot_fall_z_m``, a foot is stuck in a gap, bad
+        orientation."""
         sp = self.spec
         base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
         centres = kinematics.base_to_world(
@@ -449,13 +485,15 @@ class AnymalToFEnv(Env):
         if sp.knee_contact_terminates:
             body_contact = body_contact | jp.any(knee_contact)
         fell = base_pos[2] < self.hfield.z_floor_m + sp.fall_height_above_floor_m
-        fell = fell | (jp.min(fk.foot_pos[:, 2]) < sp.foot_fall_z_m)
+        foot_deep = jp.min(fk.foot_pos[:, 2]) < sp.foot_fall_z_m
         stuck = jp.zeros((), bool)
         if sp.foot_stuck_depth_m > 0:
             stuck = jp.any(foot_stuck(fk.foot_pos, self.hfield.height_at, sp.foot_stuck_depth_m))
         flipped = gravity[2] > -math.cos(math.radians(sp.max_tilt_deg))
-        failed = body_contact | fell | stuck | flipped
-        return failed, knee_contact.astype(jp.float32), stuck
+        reasons = dict(
+            zip(FAIL_REASONS, (body_contact, fell, foot_deep, stuck, flipped), strict=True)
+        )
+        return reasons, knee_contact
 
     def _contact(self, foot_pos: jax.Array) -> jax.Array:
         """(4,) float32: 1 where a foot centre is within radius + contact margin of the terrain."""

@@ -10,6 +10,8 @@ which feet went into the gaps:
 - ``foot_stuck``: a foot went into a gap (``env.foot_stuck_depth_m``);
 - ``fell_base_low``: another failure with the base below the terrain's top (into a gap);
 - ``other_fall``: another failure (base or knee contact, flip, divergence);
+  for these two, which terminations held in the pose the episode ended in (:data:`REASONS`,
+  from a re-run of the ending step's physics: ``AnymalToF.step_physics``, ``fail_reasons``);
 - ``timeout``: reached the deadline away from the goal (slow or stuck in place).
 
 For each ``foot_stuck`` episode it also says which way the gap that took the foot runs, from the
@@ -49,6 +51,9 @@ import numpy as np
 from foottof.constants import CONTROL_DT_S
 
 CAUSES = ("success", "foot_stuck", "fell_base_low", "other_fall", "timeout")
+# Which terminations held in the pose a failed episode ended in (anymal_tof.FAIL_REASONS, then a
+# diverged simulation); more than one may hold at once.
+REASONS = ("body_contact", "fell", "foot_deep", "foot_stuck", "flipped", "diverged")
 GAP_DIRECTIONS = ("crossing", "along", "junction", "hole")
 # Probe distances from the foot centre along +-x and +-y [m]: gaps of the stage-1 stones are
 # 0.05-0.37 m wide, so a foot anywhere in one has its stone within 0.3 m on a bounded side.
@@ -307,6 +312,7 @@ class Failures(NamedTuple):
     stall: np.ndarray  # (N,) stall_step of a timeout; -1: not a timeout, or it did not stand
     stall_progress: np.ndarray  # (N,) progress at that step [-]; nan where stall is -1
     start: np.ndarray  # (N,) first step with progress >= START_PROGRESS; -1: never in the episode
+    reasons: np.ndarray  # (N, len(REASONS)) bool: the terminations that held at a failure's end
 
 
 def run(
@@ -335,7 +341,7 @@ def run(
     import jax.numpy as jp
 
     from foottof.envs import observations as obs_lib
-    from foottof.envs.anymal_tof import SEEN_KEY
+    from foottof.envs.anymal_tof import FAIL_REASONS, SEEN_KEY
     from foottof.envs.stuck_probe import foot_gap_depth
     from foottof.eval.harness import make_eval_env_and_policy
     from foottof.robot.kinematics import world_foot_kinematics
@@ -386,6 +392,9 @@ def run(
             rec = (s2.done, m["episode/success"], m["episode/failed"], m["episode/foot_stuck"])
             rec += (s.pipeline_state.qpos[:, 2], m["episode/progress"], s.info["task"].col)
             rec += (s.pipeline_state.qpos[:, :2],)
+            d_end, diverged = jax.vmap(env.step_physics)(s, a)  # the step's pose, before a reset
+            why = jax.vmap(env.fail_reasons)(d_end)
+            rec += (jp.stack([why[k] for k in FAIL_REASONS] + [diverged], axis=-1),)
             rec += jax.vmap(feet)(s.pipeline_state.qpos)  # before the step that ends it
             if sight and seen_teacher:  # static: the flags the seen teacher read at this step
                 origin, grid = s.info[SEEN_KEY]
@@ -396,13 +405,14 @@ def run(
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
         return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
 
-    done, succ, fail, stuck, base_z, prog, col, base_xy, foot_pos, depth, *rays = (
+    done, succ, fail, stuck, base_z, prog, col, base_xy, why, foot_pos, depth, *rays = (
         np.asarray(x) for x in jax.device_get(rollout(state))
     )
     cause = classify(done, succ, fail, stuck, base_z)
     ended = done > 0.5
     t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), done.shape[0] - 1)
     e = np.arange(episodes)
+    reasons = why[t, e] & (fail[t, e] > 0.5)[:, None]  # (E, R), only where the episode failed
     types = np.asarray(env.tmap.col_type)[col[0]]
     is_stuck = cause == CAUSES.index("foot_stuck")
     foot = np.where(is_stuck, np.argmax(depth[t, e], axis=-1), -1)
@@ -442,7 +452,9 @@ def run(
     stall_prog = np.where(stall >= 0, prog[np.maximum(stall, 0), e], np.nan)
     types = [TERRAIN_TYPES[i] for i in types]
     start = start_step(prog, t)
-    return Failures(cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog, start)
+    return Failures(
+        cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog, start, reasons
+    )
 
 
 def format_sightings(rows, gap) -> str:
@@ -526,6 +538,24 @@ def format_rims(rim: np.ndarray, gap: np.ndarray) -> str:
     return "\n".join(lines)
 
 
+def format_reasons(cause, types, reasons) -> str:
+    """One line per fall cause other than foot_stuck (fell_base_low, other_fall) and terrain
+    type with such episodes (and one for all): how many ended with each REASONS termination
+    holding (an episode may count under more than one)."""
+    cause, reasons = np.asarray(cause), np.asarray(reasons, bool)
+    types = np.asarray(types)
+    lines = []
+    for c in ("fell_base_low", "other_fall"):
+        sel_c = cause == CAUSES.index(c)
+        for name in [*sorted(set(types[sel_c].tolist())), "all"]:
+            sel = sel_c & ((types == name) | (name == "all"))
+            if not sel.any():
+                continue
+            counts = ", ".join(f"{r} {int(reasons[sel, j].sum())}" for j, r in enumerate(REASONS))
+            lines.append(f"{c} reasons, {name} ({int(sel.sum())}): {counts}")
+    return "\n".join(lines) if lines else "no falls besides foot_stuck"
+
+
 def format_stalls(cause, stall, stall_progress, end_step, types, step_s: float) -> str:
     """One line per terrain type with timeouts (and one for all): how many stood still before
     the deadline, from a median step (seconds into the episode and before its end) at a median
@@ -605,6 +635,7 @@ def main(argv=None) -> None:
         print(format_feet(f.foot))
         print(format_gaps(f.gap, f.types))
         print(format_rims(f.rim, f.gap))
+        print(format_reasons(f.cause, f.types, f.reasons))
         print(format_stalls(f.cause, f.stall, f.stall_progress, f.end_step, f.types, CONTROL_DT_S))
         print(format_starts(f.cause, f.start, CONTROL_DT_S))
         if f.sightings is not None:

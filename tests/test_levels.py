@@ -128,7 +128,7 @@ def test_stone_distance_on_hand_made_gaps_and_its_lines():
     grid), and format_rims."""
     import numpy as np
 
-    from foottof.eval.failures import RIM_GRID_STEP_M, format_rims, stone_distance
+    from foottof.eval.failures import RIM_GRID_STEP_M, feet_over_gap, format_rims, stone_distance
 
     def terrain(pit):
         return lambda p: np.where(pit(np.asarray(p)[..., 0], np.asarray(p)[..., 1]), -1.0, 0.0)
@@ -143,6 +143,11 @@ def test_stone_distance_on_hand_made_gaps_and_its_lines():
     corner = terrain(lambda x, y: ~((x > 0.1) & (y > 0.1)))
     got = stone_distance(np.array([[0.0, 0.0], [0.15, -0.05]]), corner)
     np.testing.assert_allclose(got, [np.hypot(0.1, 0.1), 0.15], atol=tol)
+    # feet_over_gap: the pit floor (-1 m) under a foot centre, or stone (0 m); two envs.
+    feet4 = np.zeros((2, 4, 3))
+    feet4[0, :, 0] = (0.0, 0.14, 0.16, 0.5)  # in the crossing gap: the first two
+    feet4[1, :, 0] = (0.2, 0.3, -0.2, -0.3)  # all on stone
+    assert feet_over_gap(feet4, crossing, -1.0).tolist() == [2, 0]
     # No stone within 0.3 m (a 2 m pit), and flat ground: inf.
     wide = terrain(lambda x, y: np.abs(x) < 1.0)
     flat = terrain(lambda x, y: np.zeros_like(x, bool))
@@ -387,3 +392,8 @@ def test_failures_on_the_training_map_cover_every_column_type():
         "other_fall reasons, all (9): body_contact 9, fell 0, foot_deep 0, foot_stuck 0, "
         "flipped 0, diverged 0"
     )
+    assert f.over_gap.tolist() == [0] * 9  # standing on the start platform
+    over = np.zeros(9, int)
+    over[[0, 4]] = (1, 3)  # two of them with feet over a gap: counted once each
+    last = format_reasons(f.cause, f.types, f.reasons, over).splitlines()[-1]
+    assert last.endswith("diverged 0; a foot over a gap 2")

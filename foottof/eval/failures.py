@@ -54,6 +54,7 @@ CAUSES = ("success", "foot_stuck", "fell_base_low", "other_fall", "timeout")
 # Which terminations held in the pose a failed episode ended in (anymal_tof.FAIL_REASONS, then a
 # diverged simulation); more than one may hold at once.
 REASONS = ("body_contact", "fell", "foot_deep", "foot_stuck", "flipped", "diverged")
+PIT_FLOOR_TOL_M = 0.05  # terrain within this of the pit floor under a foot: it is over a gap [m]
 GAP_DIRECTIONS = ("crossing", "along", "junction", "hole")
 # Probe distances from the foot centre along +-x and +-y [m]: gaps of the stage-1 stones are
 # 0.05-0.37 m wide, so a foot anywhere in one has its stone within 0.3 m on a bounded side.
@@ -313,6 +314,8 @@ class Failures(NamedTuple):
     stall_progress: np.ndarray  # (N,) progress at that step [-]; nan where stall is -1
     start: np.ndarray  # (N,) first step with progress >= START_PROGRESS; -1: never in the episode
     reasons: np.ndarray  # (N, len(REASONS)) bool: the terminations that held at a failure's end
+    over_gap: np.ndarray  # (N,) how many feet were over a gap (the pit floor under the foot
+    # centre) before the last step
 
 
 def run(
@@ -453,8 +456,9 @@ def run(
     types = [TERRAIN_TYPES[i] for i in types]
     start = start_step(prog, t)
     return Failures(
-        cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog, start, reasons
-    )
+        cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog, start, reasons,
+        feet_over_gap(foot_pos[t, e], height_at, env.hfield.z_floor_m),
+    )  # fmt: skip
 
 
 def format_sightings(rows, gap) -> str:
@@ -538,12 +542,23 @@ def format_rims(rim: np.ndarray, gap: np.ndarray) -> str:
     return "\n".join(lines)
 
 
-def format_reasons(cause, types, reasons) -> str:
+def feet_over_gap(foot_pos, height_at, z_floor_m: float) -> np.ndarray:
+    """(E,) how many of each env's feet ((E, 4, 3) centres) are over a gap: the terrain under
+    the centre is within PIT_FLOOR_TOL_M of the pit floor."""
+    pos = np.asarray(foot_pos)
+    under = height_at(pos[..., :2].reshape(-1, 2)).reshape(pos.shape[:-1])
+    return (under <= z_floor_m + PIT_FLOOR_TOL_M).sum(axis=-1)
+
+
+def format_reasons(cause, types, reasons, over_gap=None) -> str:
     """One line per fall cause other than foot_stuck (fell_base_low, other_fall) and terrain
     type with such episodes (and one for all): how many ended with each REASONS termination
-    holding (an episode may count under more than one)."""
+    holding (an episode may count under more than one), and with ``over_gap``
+    (:func:`feet_over_gap`) how many had a foot over a gap before the last step (a misstep)
+    rather than all four on terrain (a loss of balance)."""
     cause, reasons = np.asarray(cause), np.asarray(reasons, bool)
     types = np.asarray(types)
+    low = None if over_gap is None else np.asarray(over_gap) > 0
     lines = []
     for c in ("fell_base_low", "other_fall"):
         sel_c = cause == CAUSES.index(c)
@@ -552,6 +567,8 @@ def format_reasons(cause, types, reasons) -> str:
             if not sel.any():
                 continue
             counts = ", ".join(f"{r} {int(reasons[sel, j].sum())}" for j, r in enumerate(REASONS))
+            if low is not None:
+                counts += f"; a foot over a gap {int(low[sel].sum())}"
             lines.append(f"{c} reasons, {name} ({int(sel.sum())}): {counts}")
     return "\n".join(lines) if lines else "no falls besides foot_stuck"
 
@@ -635,7 +652,7 @@ def main(argv=None) -> None:
         print(format_feet(f.foot))
         print(format_gaps(f.gap, f.types))
         print(format_rims(f.rim, f.gap))
-        print(format_reasons(f.cause, f.types, f.reasons))
+        print(format_reasons(f.cause, f.types, f.reasons, f.over_gap))
         print(format_stalls(f.cause, f.stall, f.stall_progress, f.end_step, f.types, CONTROL_DT_S))
         print(format_starts(f.cause, f.start, CONTROL_DT_S))
         if f.sightings is not None:

@@ -117,6 +117,8 @@ def test_paired_cells_hand_checked():
     # b: episode 9 and 11-14 neither succeed nor fall (18 = 4 successes + 9 falls + 5)
     assert (row["timeouts_a"], row["timeouts_b"]) == (0, 5)
     assert "McNemar" in paired.format_table([row]) and "timeouts" in paired.format_table([row])
+    head = paired.format_table([row], ("mean", "sampled")).splitlines()[0]
+    assert "mean only sampled only" in head and "timeouts mean timeouts sampled" in head
     grid, gap = results.terrain_breakdown(a)  # even episodes grid stones, odd ones gaps
     # grid: successes at 0 2 4 6 8 16, falls at 10 12 14; gap: successes at 1 3 5 7 9 15 17
     assert (grid["terrain"], grid["episodes"], grid["successes"], grid["falls"]) == (

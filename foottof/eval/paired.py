@@ -235,21 +235,32 @@ def actions_of(out_dir: str) -> str | None:
 
 
 def format_table(rows: list[dict], names=("a", "b")) -> str:
+    """The paired rows as a fixed-width table; every column at least one wider than its
+    header, so long branch names stay apart."""
     a, b = names
     w = max([11] + [len(r["source"]) + 2 for r in rows])
-    head = (
-        f"{'source':<{w}}{'perturbation':<14}{'level':>7}{'n':>6}{a:>12}{b:>12}"
-        f"{a + ' only':>12}{b + ' only':>12}{'McNemar p':>11}{'falls ' + a:>12}{'falls ' + b:>12}"
-        f"{'timeouts ' + a:>14}{'timeouts ' + b:>14}"
+    cols = [  # (header, minimum width, cell)
+        ("level", 7, lambda r: f"{r['level']:.3g}"),
+        ("n", 6, lambda r: f"{r['episodes']:d}"),
+        (a, 12, lambda r: f"{r['successes_a'] / r['episodes']:.3f}"),
+        (b, 12, lambda r: f"{r['successes_b'] / r['episodes']:.3f}"),
+        (a + " only", 12, lambda r: f"{r['a_only']:d}"),
+        (b + " only", 12, lambda r: f"{r['b_only']:d}"),
+        ("McNemar p", 11, lambda r: f"{r['p_value']:.3g}"),
+        ("falls " + a, 12, lambda r: f"{r['falls_a']:d}"),
+        ("falls " + b, 12, lambda r: f"{r['falls_b']:d}"),
+        ("timeouts " + a, 14, lambda r: f"{r['timeouts_a']:d}"),
+        ("timeouts " + b, 14, lambda r: f"{r['timeouts_b']:d}"),
+    ]
+    widths = [max(m, len(h) + 1) for h, m, _ in cols]
+    head = f"{'source':<{w}}{'perturbation':<14}" + "".join(
+        f"{h:>{cw}}" for (h, _, _), cw in zip(cols, widths, strict=True)
     )
     lines = [head, "-" * len(head)]
     for r in rows:
-        n = r["episodes"]
         lines.append(
-            f"{r['source']:<{w}}{r['perturbation']:<14}{r['level']:>7.3g}{n:>6d}"
-            f"{r['successes_a'] / n:>12.3f}{r['successes_b'] / n:>12.3f}{r['a_only']:>12d}"
-            f"{r['b_only']:>12d}{r['p_value']:>11.3g}{r['falls_a']:>12d}{r['falls_b']:>12d}"
-            f"{r['timeouts_a']:>14d}{r['timeouts_b']:>14d}"
+            f"{r['source']:<{w}}{r['perturbation']:<14}"
+            + "".join(f"{cell(r):>{cw}}" for (_, _, cell), cw in zip(cols, widths, strict=True))
         )
     return "\n".join(lines)
 

@@ -14,6 +14,8 @@ from configs import distill_wide_cpu
 
 def get_config():
     c = distill_wide_cpu.get_config()
-    c.train.teacher = "policies/teacher_wide_edge"  # a run or policy folder of the foot-edge teacher
+    c.train.teacher = (
+        "policies/teacher_wide_edge"  # a run or policy folder of the foot-edge teacher
+    )
     c.train.run_name = "distill_wide_edge_cpu"
     return c

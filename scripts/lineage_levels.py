@@ -24,9 +24,7 @@ import tempfile
 
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 
-import numpy as np  # noqa: E402
-
-from foottof.lab.levels import level_counts  # noqa: E402
+from foottof.lab.levels import level_counts, mean_level  # noqa: E402
 
 
 def shipped(folder: str) -> list[tuple[str, int]]:
@@ -57,8 +55,7 @@ def levels_at(folder: str, commit: str, tmp: str) -> tuple[dict, int]:
     run = os.path.join(dest, folder)
     with open(os.path.join(run, "config.json")) as f:
         ppo = json.load(f)["ppo"]
-    counts = level_counts(run)
-    means = {t: float(np.dot(c, np.arange(len(c))) / max(c.sum(), 1)) for t, c in counts.items()}
+    means = {t: mean_level(c) for t, c in level_counts(run).items()}
     return means, int(ppo["num_envs"]) * int(ppo["num_steps"])
 
 
@@ -75,14 +72,15 @@ def main(argv=None) -> None:
     with tempfile.TemporaryDirectory() as tmp:
         for spec in args.folders:
             folder, _, until = spec.partition(":")
+            folder = folder.rstrip("/")
             if until and not until.isdigit():
                 raise SystemExit(
                     f"error: {spec!r}: the part after ':' must be an iteration, got {until!r}"
                 )
-            for commit, it in shipped(folder.rstrip("/")):
+            for commit, it in shipped(folder):
                 if it <= last or (until and it > int(until)):
                     continue
-                means, per_it = levels_at(folder.rstrip("/"), commit, tmp)
+                means, per_it = levels_at(folder, commit, tmp)
                 rows.append({"folder": folder, "commit": commit[:7], "iteration": it,
                              "env_steps": it * per_it, **{k: round(v, 3) for k, v in means.items()}})  # fmt: skip
                 last = it

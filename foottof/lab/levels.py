@@ -111,14 +111,18 @@ def level_counts(run_dir: str, step: int | None = None) -> dict[str, np.ndarray]
     return out
 
 
+def mean_level(counts: np.ndarray) -> float:
+    """Mean curriculum level of one type's (num_levels,) envs-per-level counts (0 when empty)."""
+    return float(np.dot(counts, np.arange(len(counts))) / max(counts.sum(), 1))
+
+
 def format_table(counts: dict[str, np.ndarray]) -> str:
     """Plain-text table: one row per type, envs per level, then the type's mean level."""
     num_levels = len(next(iter(counts.values())))
     head = f"{'terrain type':<18}" + "".join(f"{i:>5}" for i in range(num_levels)) + "   mean"
     lines = [head]
     for name, c in counts.items():
-        mean = float(np.dot(c, np.arange(num_levels)) / max(c.sum(), 1))
-        lines.append(f"{name:<18}" + "".join(f"{int(v):>5}" for v in c) + f"  {mean:5.2f}")
+        lines.append(f"{name:<18}" + "".join(f"{int(v):>5}" for v in c) + f"  {mean_level(c):5.2f}")
     return "\n".join(lines)
 
 

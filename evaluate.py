@@ -159,7 +159,12 @@ def main(argv):
     from foottof.eval import results
     from foottof.eval import robustness as rb
     from foottof.perception import check_source
-    from foottof.ppo.run_dir import resolve_checkpoint, with_run_network
+    from foottof.ppo.run_dir import (
+        resolve_checkpoint,
+        run_config_path,
+        with_run_curriculum,
+        with_run_network,
+    )
 
     cfg = _CONFIG.value
     out = _OUT.value or cfg.eval.out_dir
@@ -178,6 +183,9 @@ def main(argv):
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
         overrides = config_flags.get_override_values(flags.FLAGS["config"])
         cfg = with_run_network(cfg, ckpt, overrides)
+        cfg, note = with_run_curriculum(cfg, ckpt and run_config_path(ckpt), overrides)
+        if note:
+            print(f"[evaluate] {note}")
         cap = results.action_std_cap(cfg)
         acts = "mean actions" if cap is None else "actions sampled at the action std"
         acts += f", capped at {cap:g}" if cap else ""

@@ -52,6 +52,13 @@ def main(argv):
         )
     except (ValueError, FileNotFoundError, FileExistsError) as e:
         sys.exit(f"error: {e}")
+    if _RESUME.value:  # a resumed run keeps the stone curriculum it trained on
+        overrides = config_flags.get_override_values(flags.FLAGS["config"])
+        cfg, note = run_dirs.with_run_curriculum(
+            cfg, os.path.join(run_dir, "config.json"), overrides
+        )
+        if note:
+            print(f"[train] {note}")
     init_from = None if _RESUME.value else (t.init_from or None)
     if init_from and not os.path.exists(init_from):
         sys.exit(

@@ -60,6 +60,12 @@ def get_section() -> ml_collections.ConfigDict:
     c.spawn_yaw_spread_rad = 0.3  # spawn yaw ~ U(+-this) around +x [rad]
     c.goal_x_spread_m = 0.2  # goal x ~ U(+-this) around the goal region centre [m]
     c.goal_y_spread_m = 0.2  # goal y ~ U(+-this) around the tile centre line [m]
+    # Stone curriculum: how stone size, gap and height spread move with the difficulty
+    # (foottof.terrain.tiles.STONE_CURRICULA): "size_first" shrinks the stones to the ensemble's
+    # size at 0.10 m gaps first, then widens the gaps, then spreads the tops; "gaps_first" (runs
+    # saved before 2026-12-07) widens the gaps first and shrinks the stones last. Both hold the
+    # same stones from d = 0.72 (the evaluation ensemble) on.
+    c.stone_curriculum = "size_first"
     # Curriculum (foottof/terrain/curriculum.py).
     c.init_level_max = 2  # initial level ~ U{0..init_level_max} [level]
     c.down_progress_frac = 0.5  # move down when covered < this fraction of the goal distance [-]

@@ -181,6 +181,7 @@ RULES = {
     "terrain.down_progress_frac": _frac,
     "terrain.up_progress_frac": _frac,
     "terrain.flat": _bool,
+    "terrain.stone_curriculum": _choice("size_first", "gaps_first"),  # tiles.STONE_CURRICULA
     "terrain.no_promotion_on_fall": _bool,
     "terrain.stretch_prob": _frac,
     "terrain.stretch_min_level": _int(0),  # the env clips it to num_levels - 1

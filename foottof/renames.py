@@ -54,6 +54,7 @@ ADDED_FIELDS = {
     "reward.overspeed_mps": 0.6,  # read only when the overspeed term is on
     "ppo.low_noise_share": 0.0,  # every env acts at the policy's std
     "ppo.low_noise_scale": 0.25,  # read only when low_noise_share > 0
+    "terrain.stone_curriculum": "gaps_first",  # stones shrink last (tiles.STONE_CURRICULA)
 }
 # Added fields that were already in the configs of the evaluations kept (results/): draw
 # fingerprints hash them at every value, as those evaluations did; ADDED_FIELDS gives only the

@@ -13,7 +13,10 @@ from configs import load_config
 from foottof import config_check as cc
 
 CONFIG_FILES = sorted(
-    p for p in glob.glob(os.path.join(REPO, "configs", "*.py")) if not os.path.basename(p)[0] == "_"
+    p
+    for pattern in ("*.py", "experiments/*.py")
+    for p in glob.glob(os.path.join(REPO, "configs", pattern))
+    if not os.path.basename(p)[0] == "_"
 )
 
 
@@ -34,6 +37,7 @@ def _set(cfg, dotted, value):
 # (field, bad value, words the message must hold)
 BAD = [
     ("ppo.num_envs", -1, ">= 1"),
+    ("terrain.stone_curriculum", "dense", "['size_first', 'gaps_first']"),
     ("ppo.num_envs", 66, "divisible by ppo.num_minibatches=4"),
     ("ppo.num_minibatches", 0, ">= 1"),
     ("ppo.gamma", 1.5, "[0, 1]"),

@@ -147,6 +147,7 @@ def test_draw_fingerprint_is_kept_across_the_rename():
     cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
     cfg.eval.num_envs, cfg.eval.seed, cfg.eval.episodes = 200, 4242, 200
     cfg.eval.difficulty_fraction = 0.125
+    cfg.terrain.stone_curriculum = "gaps_first"  # what that run trained and evaluated on
     assert results.episode_draws(cfg) == doc["draws"]
     cfg.eval.deterministic, cfg.network.max_noise_std = False, 0.15  # sampled: the same draws
     assert results.episode_draws(cfg) == doc["draws"]
@@ -160,6 +161,30 @@ def test_draw_fingerprint_is_kept_across_the_rename():
         renames.migrate_config_dict({"reward": {"stall_speed_ms": 1}})
     )
     assert back == {"reward": {"stall_speed_ms": 1}}
+
+
+def test_ensemble_evaluations_pair_across_the_stone_curricula():
+    """An ensemble evaluation written before terrain.stone_curriculum existed
+    (results/wideedge_it5120_ens: difficulty 0.9 of the stage-1 range, d = 0.72) pairs with one
+    made now on either curriculum: there every curriculum draws the same stones. Below the knot
+    (difficulty 0.45) the curriculum decides the tiles and the fingerprints part."""
+    from foottof.eval import results
+
+    doc = json.loads(
+        (Path(REPO) / "results" / "wideedge_it5120_ens" / "episodes_tof_none.json").read_text()
+    )
+    cfg = load_config(str(Path(REPO) / "configs" / "stage1_cpu.py"))
+    cfg.eval.num_envs, cfg.eval.seed, cfg.eval.episodes = 200, 4242, 200
+    cfg.env.actor_terrain = True  # the teacher (not a draw: the same fingerprint as a student)
+    for curriculum in ("size_first", "gaps_first"):
+        cfg.terrain.stone_curriculum = curriculum
+        assert results.episode_draws(cfg) == doc["draws"], curriculum
+    cfg.eval.difficulty_fraction = 0.45
+    prints = set()
+    for curriculum in ("size_first", "gaps_first"):
+        cfg.terrain.stone_curriculum = curriculum
+        prints.add(results.draws_fingerprint(cfg))
+    assert len(prints) == 2
 
 
 def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():

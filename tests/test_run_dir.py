@@ -132,3 +132,27 @@ def test_a_command_line_action_std_cap_outlives_the_runs_network(tmp_path):
     cfg.env.actor_terrain = False  # the run's actor reads the terrain
     with pytest.raises(ValueError, match=r"env.actor_terrain=False on the command line"):
         rd.with_run_network(cfg, ckpt, {"env.actor_terrain"})
+
+
+def test_a_run_keeps_its_stone_curriculum_unless_the_command_line_sets_one(tmp_path):
+    """A resumed or evaluated run takes terrain.stone_curriculum from its config.json; one saved
+    before the field existed trained gaps-first; a command-line value wins; the caller's config
+    is not changed."""
+    from configs import stage1_cpu
+
+    cfg = stage1_cpu.get_config()
+    assert cfg.terrain.stone_curriculum == "size_first"
+    old = cfg.to_dict()
+    del old["terrain"]["stone_curriculum"]  # saved before 2026-12-07
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(old, default=list))
+    kept, note = rd.with_run_curriculum(cfg, str(path))
+    assert kept.terrain.stone_curriculum == "gaps_first" and "gaps_first" in note
+    assert cfg.terrain.stone_curriculum == "size_first"
+    same, note = rd.with_run_curriculum(cfg, str(path), {"terrain.stone_curriculum": "size_first"})
+    assert same.terrain.stone_curriculum == "size_first" and note is None
+    new = cfg.to_dict()  # a run saved with the field keeps its value
+    path.write_text(json.dumps(new, default=list))
+    cfg.terrain.stone_curriculum = "gaps_first"
+    assert rd.with_run_curriculum(cfg, str(path))[0].terrain.stone_curriculum == "size_first"
+    assert rd.with_run_curriculum(cfg, None)[0] is cfg  # no run: the config as given

@@ -5,6 +5,7 @@ import time
 
 import jax
 import jax.numpy as jp
+import ml_collections
 import mujoco
 import numpy as np
 import pytest
@@ -35,9 +36,17 @@ from foottof.terrain import (
 from foottof.terrain.curriculum import played_rows, stretch_levels
 from foottof.terrain.heightfield import write_to_mjx
 from foottof.terrain.terrain_map import tile_generator
-from foottof.terrain.tiles import STONE_TYPES, crack_sag_m, stone_params
+from foottof.terrain.tiles import (
+    STONE_CURRICULUM_NAMES,
+    STONE_TYPES,
+    crack_sag_m,
+    stone_params,
+)
 
 SPEC = TileSpec()
+# The drawing tests below were written against the gaps-first stone curriculum (stones shrink
+# last) and keep it; the size-first curriculum has its own tests (test_size_first_*).
+GAPS_FIRST = TileSpec(stone_curriculum="gaps_first")
 CELL = SPEC.cell_m
 PIT = SPEC.pit_z_m
 DIFFS = (0.0, 0.5, 1.0)
@@ -50,7 +59,7 @@ def tiles():
     keys = jax.random.split(jax.random.key(1234), NSEED)
     out = {}
     for name in TERRAIN_TYPES:
-        per_seed = jax.vmap(lambda k, d, n=name: generate_tile(n, k, d), (0, None))
+        per_seed = jax.vmap(lambda k, d, n=name: generate_tile(n, k, d, GAPS_FIRST), (0, None))
         gen = jax.jit(jax.vmap(per_seed, (None, 0)))  # -> (difficulty, seed, ny, nx)
         out[name] = np.asarray(gen(keys, jp.asarray(DIFFS)))
     return out
@@ -218,7 +227,10 @@ def test_drawn_tops_and_gaps_match_their_nominal_size():
     t = (d - 0.4) / 0.32
     size = (0.80 + (0.2976 - 0.80) * t) * (1 + 1.0 + (0.9196 - 1.0) * t) / 2
     gap = 0.24 + (0.338 - 0.24) * t
-    zs = [np.asarray(generate_tile("two_row_stones", jax.random.PRNGKey(s), d)) for s in range(40)]
+    zs = [
+        np.asarray(generate_tile("two_row_stones", jax.random.PRNGKey(s), d, GAPS_FIRST))
+        for s in range(40)
+    ]
     sizes = [v for z in zs for v in _stone_sizes_x(z)]
     gaps = [v for z in zs for v in _gaps_x(z)]
     assert len(sizes) > 50 and len(gaps) > 50
@@ -276,7 +288,7 @@ def test_pyramids_steepen(tiles, name):
 def test_same_key_same_tile_and_jit_equals_eager(tiles, name):
     key = jax.random.split(jax.random.key(1234), NSEED)[0]
     with jax.disable_jit():
-        eager = np.asarray(generate_tile(name, key, 0.5))
+        eager = np.asarray(generate_tile(name, key, 0.5, GAPS_FIRST))
     np.testing.assert_allclose(eager, tiles[name][1, 0], atol=1e-5)  # vmap + jit == eager
     # Different keys give different tiles (placement is random).
     assert not np.array_equal(tiles[name][1, 0], tiles[name][1, 1])
@@ -551,16 +563,104 @@ def test_stone_schedules_keep_the_evaluation_ensemble():
             f_lo=lerp(0.95, 0.75, d),
         ),
     }
-    for name, fn in old.items():
-        for d in (0.72, 0.8, 0.9, 1.0):
-            new = stone_params(name, d)
-            for k, v in fn(d).items():
-                assert abs(float(new[k]) - v) < 1e-5, (name, d, k, float(new[k]), v)
-        easy = stone_params(name, 0.0)
-        assert float(easy["size"]) >= 0.8 and float(easy["dz"]) == 0.0
-        assert float(easy["gap"]) * (1 + 2 * float(easy["jitter"])) < 2 * FOOT_R
-        one = stone_params(name, 0.8 / 9)  # level 1: every gap wider than the foot
-        assert float(one["gap"]) * (1 - 2 * float(one["jitter"])) > 2 * FOOT_R
+    for curriculum in STONE_CURRICULUM_NAMES:
+        for name, fn in old.items():
+            for d in (0.72, 0.8, 0.9, 1.0):
+                new = stone_params(name, d, curriculum)
+                for k, v in fn(d).items():
+                    assert abs(float(new[k]) - v) < 1e-5, (curriculum, name, d, k, float(new[k]), v)
+            easy = stone_params(name, 0.0, curriculum)
+            assert float(easy["size"]) >= 0.8 and float(easy["dz"]) == 0.0
+            assert float(easy["gap"]) * (1 + 2 * float(easy["jitter"])) < 2 * FOOT_R
+            one = stone_params(name, 0.8 / 9, curriculum)  # level 1: every gap wider than the foot
+            assert float(one["gap"]) * (1 - 2 * float(one["jitter"])) > 2 * FOOT_R
+
+
+@pytest.mark.parametrize("name", STONE_TYPES)
+def test_both_stone_curricula_draw_the_same_ensemble(name):
+    """The evaluation ensemble (difficulty 0.9 x 0.8 = 0.72, taken to float32 as the map does)
+    and everything harder draw the same heights, bit for bit, whichever curriculum: the knot's
+    values at the knot."""
+    gaps, size = TileSpec(stone_curriculum="gaps_first"), TileSpec(stone_curriculum="size_first")
+    for d in (0.9 * 0.8, 0.8, 1.0):
+        for seed in range(3):
+            key = jax.random.PRNGKey(seed)
+            a = np.asarray(generate_tile(name, key, np.float32(d), gaps))
+            b = np.asarray(generate_tile(name, key, np.float32(d), size))
+            np.testing.assert_array_equal(a, b, err_msg=f"{name} d={d} seed={seed}")
+    # ... and not below it (the curricula differ: the check above can fail).
+    a = np.asarray(generate_tile(name, jax.random.PRNGKey(0), 0.36, gaps))
+    b = np.asarray(generate_tile(name, jax.random.PRNGKey(0), 0.36, size))
+    assert not np.array_equal(a, b)
+
+
+# Hand values of the size-first curriculum's stages (the issue "Stones, fourth round"): the
+# ensemble's stone (0.72) is reached at d = 0.36 with 0.10 m gaps and level tops, the ensemble's
+# gap at 0.54 with level tops, the ensemble's height spread at 0.72.
+ENSEMBLE = {  # at d = 0.72: size, gap, dz
+    "grid_stones": (0.2976, 0.266, 0.144),
+    "two_row_stones": (0.2976, 0.338, 0.108),
+    "mixed_row_stones": (0.2696, 0.302, 0.144),
+}
+
+
+@pytest.mark.parametrize("name", STONE_TYPES)
+def test_size_first_shrinks_then_widens_then_spreads(name):
+    size, gap, dz = ENSEMBLE[name]
+    at = lambda d: {k: float(v) for k, v in stone_params(name, d, "size_first").items()}  # noqa: E731
+    small = at(0.36)
+    assert abs(small["size"] - size) < 1e-6 and abs(small["gap"] - 0.10) < 1e-6, small
+    assert small["dz"] == 0.0, small
+    wide = at(0.54)
+    assert abs(wide["size"] - size) < 1e-6 and abs(wide["gap"] - gap) < 1e-6, wide
+    assert wide["dz"] == 0.0, wide
+    ens = at(0.72)
+    assert abs(ens["dz"] - dz) < 1e-6, ens
+    # Every parameter moves one way over d: sizes never grow, gaps and spreads never narrow, and
+    # no stage starts before the one before it has ended.
+    ds = np.linspace(0.0, 1.0, 201)
+    rows = [at(d) for d in ds]
+    sizes, gaps, dzs = (np.array([r[k] for r in rows]) for k in ("size", "gap", "dz"))
+    assert np.all(np.diff(sizes) <= 1e-6) and np.all(np.diff(dzs) >= -1e-6)
+    assert np.all(np.diff(gaps[ds >= 0.08]) >= -1e-6)
+    assert np.all(gaps[(ds >= 0.08) & (ds <= 0.36)] <= 0.10 + 1e-6)  # narrow while shrinking
+    assert np.all(dzs[ds <= 0.54] == 0.0)  # level tops until the gaps are the ensemble's
+    # Level by level (10 over (0, 0.8)): no level shrinks the stones by more than 30 %.
+    levels = [at(0.8 * k / 9)["size"] for k in range(10)]
+    assert all(b / a >= 0.70 for a, b in zip(levels[:-1], levels[1:], strict=True)), levels
+
+
+@pytest.mark.parametrize("name", STONE_TYPES)
+def test_size_first_draws_small_stones_at_narrow_gaps(name):
+    """Measured on generated tiles at d = 0.36 (level ~4): the stones' flat tops average the
+    ensemble's nominal size x the mean size factor (hand-computed from the table) within a cell,
+    and the gaps crossed along x (grid and two-row stones) average the nominal 0.10 m within half
+    a cell."""
+    size, _, _ = ENSEMBLE[name]
+    f_lo = float(stone_params(name, 0.36, "size_first")["f_lo"])
+    spec = TileSpec(stone_curriculum="size_first")
+    zs = [np.asarray(generate_tile(name, jax.random.PRNGKey(s), 0.36, spec)) for s in range(12)]
+    sizes = [v for z in zs for v in _stone_sizes_x(z)]
+    gaps = [v for z in zs for v in _gaps_x(z) if v < 1.0]  # not a line along a row gap
+    assert len(sizes) > 50 and len(gaps) > 50
+    expect = size * (1 + f_lo) / 2
+    assert abs(np.mean(sizes) - expect) < CELL, (np.mean(sizes), expect)
+    if name != "mixed_row_stones":  # (mixed rows shift each column across y: no x-line gap)
+        assert abs(np.mean(gaps) - 0.10) < CELL / 2, np.mean(gaps)
+
+
+def test_saved_config_without_stone_curriculum_keeps_gaps_first():
+    """A run config saved before terrain.stone_curriculum existed trained (and evaluates) on the
+    gaps-first curriculum; a fresh config trains size-first; a bad name is one clear error."""
+    from configs import _terrain
+
+    fresh = _terrain.get_section()
+    assert TileSpec.from_config(fresh).stone_curriculum == "size_first"
+    saved = ml_collections.ConfigDict(fresh.to_dict())
+    del saved["stone_curriculum"]
+    assert TileSpec.from_config(saved).stone_curriculum == "gaps_first"
+    with pytest.raises(ValueError, match="stone_curriculum.*size_first"):
+        TileSpec(stone_curriculum="dense")
 
 
 # ------------------------------------------------------------------------------- terrain map

@@ -171,14 +171,34 @@ def ensemble_caption(ensemble: dict, rows: list[dict], checkpoints: list[str] = 
     return text
 
 
+def _stone_curriculum_moot(cfg) -> bool:
+    """True where every stone type of the evaluation ensemble is drawn at a difficulty at or past
+    tiles.ENSEMBLE_KNOT, from where all stone curricula hold the same values (exactly: a knot's
+    values at the knot), so terrain.stone_curriculum does not change the episodes."""
+    from foottof.terrain.tiles import ENSEMBLE_KNOT, STONE_TYPES
+
+    frac = float(cfg.eval.difficulty_fraction)
+    for name in cfg.eval.stone_types:
+        if name not in STONE_TYPES:
+            continue
+        lo, hi = cfg.terrain.stage1_difficulty[name]
+        if np.float32(lo + frac * (hi - lo)) < np.float32(ENSEMBLE_KNOT):
+            return False
+    return True
+
+
 def draws_fingerprint(cfg) -> str:
     """sha256 (16 hex digits) of the config leaves that decide an evaluation's episode draws
     and outcomes (DRAW_SECTIONS): two evaluations with equal fingerprints, seeds, batch sizes and
     episode counts ran the same episodes, so their outcomes pair episode by episode. Renamed
     fields are hashed under their old names (foottof.renames): a rename keeps the fingerprint.
-    ``eval.deterministic`` is hashed as True: mean and sampled actions of one policy pair."""
+    ``eval.deterministic`` is hashed as True: mean and sampled actions of one policy pair.
+    ``terrain.stone_curriculum`` is left out where the ensemble's stones do not depend on it
+    (difficulty at or past tiles.ENSEMBLE_KNOT, the 90 % ensemble among them)."""
     d = {k: cfg[k].to_dict() if hasattr(cfg[k], "to_dict") else cfg[k] for k in DRAW_SECTIONS}
     d = renames.legacy_config_dict(d)  # renamed fields hash under their first names
+    if _stone_curriculum_moot(cfg):  # the ensemble's stones are the same in every curriculum
+        d["terrain"] = {k: v for k, v in d["terrain"].items() if k != "stone_curriculum"}
     d["eval"] = dict(d["eval"])
     for k in _NOT_DRAW_EVAL_KEYS:
         d["eval"].pop(k, None)

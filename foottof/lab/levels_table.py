@@ -4,7 +4,8 @@ and what a foot meets, counted on generated tiles.
 ``python -m foottof.lab.levels_table [--config configs/stage1_cpu.py] [--seeds 6]`` prints a
 Markdown table (docs/terrain_levels.md holds its output). Per level of each stage-1 type with a
 pit: the difficulty d of the level (``terrain.stage1_difficulty``, ``terrain.num_levels``), the
-nominal parameters at d (tiles.STONE_SCHEDULES; platform gaps: the largest gap), and measured on
+nominal parameters at d (tiles.STONE_CURRICULA, the config's terrain.stone_curriculum;
+platform gaps: the largest gap), and measured on
 ``--seeds`` tiles along straight foot lines (x direction, at the feet's lateral offsets +-0.31 m
 around five centre lines within +-0.2 m of the tile's): gaps to the pit floor crossed per metre
 (hazards), the narrowest and widest of them [m] (top opening: last solid vertex to the next) and
@@ -18,17 +19,25 @@ import argparse
 import jax
 import numpy as np
 
-from foottof.terrain.tiles import STONE_SCHEDULES, TileSpec, generate_tile, stone_params
+from foottof.terrain.tiles import (
+    DEFAULT_STONE_CURRICULUM,
+    STONE_CURRICULUM_NAMES,
+    STONE_TYPES,
+    TileSpec,
+    generate_tile,
+    stone_params,
+)
 
 TABLE_TYPES = ("grid_stones", "two_row_stones", "mixed_row_stones", "platform_gap")
 FOOT_OFFSETS_M = (-0.31, 0.31)  # ANYmal-D feet at +-0.31 m from the base centre line
 CENTRE_LINES_M = (-0.2, -0.1, 0.0, 0.1, 0.2)
 
 
-def nominal(name: str, d: float) -> dict:
-    """Nominal stone size, gap and height spread [m] of ``name`` at difficulty ``d``."""
-    if name in STONE_SCHEDULES:
-        p = {k: float(v) for k, v in stone_params(name, d).items()}
+def nominal(name: str, d: float, curriculum: str = DEFAULT_STONE_CURRICULUM) -> dict:
+    """Nominal stone size, gap and height spread [m] of ``name`` at difficulty ``d`` (stone
+    types: on the stone ``curriculum``)."""
+    if name in STONE_TYPES:
+        p = {k: float(v) for k, v in stone_params(name, d, curriculum).items()}
         return {"size": p["size"], "gap": p["gap"], "dz": p["dz"]}
     # platform_gap (tiles._platform_gap): platforms 0.6-1.6 m, largest gap, spread, linear in d.
     return {"size": 1.3 - 0.5 * d, "gap": 0.05 + 0.70 * d, "dz": 0.20 * d}
@@ -73,7 +82,7 @@ def table(cfg_terrain, seeds: int = 6) -> list[dict]:
                     "type": name,
                     "level": level,
                     "d": d,
-                    **nominal(name, d),
+                    **nominal(name, d, spec.stone_curriculum),
                     "hazards_per_m": deep / metres,
                     "narrowest": min(widths) if widths else float("nan"),
                     "widest": max(widths) if widths else float("nan"),
@@ -104,10 +113,23 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default="configs/stage1_cpu.py")
     ap.add_argument("--seeds", type=int, default=6)
+    ap.add_argument(
+        "--stone_curriculum",
+        default=None,
+        help="size_first or gaps_first (default: the config's terrain.stone_curriculum)",
+    )
     args = ap.parse_args(argv)
     if args.seeds < 1:
         raise SystemExit(f"error: --seeds={args.seeds} must be >= 1")
-    print(format_markdown(table(load_config(args.config).terrain, args.seeds)), end="")
+    terrain = load_config(args.config).terrain
+    if args.stone_curriculum is not None:
+        if args.stone_curriculum not in STONE_CURRICULUM_NAMES:
+            raise SystemExit(
+                f"error: --stone_curriculum={args.stone_curriculum!r}; valid choices: "
+                f"{', '.join(STONE_CURRICULUM_NAMES)}"
+            )
+        terrain.stone_curriculum = args.stone_curriculum
+    print(format_markdown(table(terrain, args.seeds)), end="")
 
 
 if __name__ == "__main__":

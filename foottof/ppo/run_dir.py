@@ -175,6 +175,37 @@ RUN_INPUT_FIELDS = ("critic_height_scan", "actor_terrain", "actor_terrain_seen")
 RUN_NETWORK_FREE_FIELDS = ("max_noise_std",)
 
 
+CURRICULUM_FIELD = "terrain.stone_curriculum"
+
+
+def with_run_curriculum(cfg, run_config: str | None, overrides=()):
+    """`cfg` with the stone curriculum its run trained on (``terrain.stone_curriculum`` of the
+    run's config.json at ``run_config``; "gaps_first" where it was saved before the field
+    existed), unless the command line set it (``overrides``): a resumed run keeps its
+    curriculum, and a policy is evaluated on the curriculum it learned (at the ensemble's
+    difficulty every curriculum draws the same stones). A copy; ``cfg`` when nothing changes.
+
+    Returns:
+      (config, note): note is a line saying what was taken from the run, or None."""
+    if run_config is None or not os.path.isfile(run_config) or CURRICULUM_FIELD in set(overrides):
+        return cfg, None
+    with open(run_config) as f:
+        saved = json.load(f)
+    if "terrain" not in saved:
+        return cfg, None
+    value = str(read_added(saved["terrain"], CURRICULUM_FIELD))
+    if cfg.terrain.get("stone_curriculum") == value:
+        return cfg, None
+    c = copy.deepcopy(cfg)
+    with c.unlocked():
+        c.terrain.stone_curriculum = value
+    note = (
+        f"{CURRICULUM_FIELD}={value!r} as its run trained ({run_config}); "
+        f"--config.{CURRICULUM_FIELD}=NAME sets another"
+    )
+    return c, note
+
+
 def with_run_network(cfg, checkpoint: str | None, overrides=()):
     """`cfg` (a ConfigDict) with c.network, and the env fields that shape the network's inputs
     (RUN_INPUT_FIELDS), from the checkpoint's run config (if it has one).

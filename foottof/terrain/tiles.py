@@ -11,6 +11,7 @@ import jax.numpy as jp
 import numpy as np
 
 from foottof import config_check, constants
+from foottof.renames import read_added
 
 # The paper's nine types, in order: stage 1 (first five), then the four stage-2 additions.
 TERRAIN_TYPES = (
@@ -48,50 +49,94 @@ SPAWN_SURFACE_Z_M = {name: 0.0 for name in TERRAIN_TYPES}
 # foot is drawn that sag below the surrounding top (the foot cannot sink deeper than the drawn
 # bottom), and only gaps at least as wide as the foot are drawn to the pit floor; a foot that goes
 # into one of those is a fall, ended by the env's stuck-foot termination (env.foot_stuck_depth_m)
-# rather than left wedged. The stone curricula never draw gaps narrower than the foot (see
-# STONE_SCHEDULES), platform gaps at their easiest level do.
+# rather than left wedged. The stone curricula never draw gaps narrower than the foot past
+# level 0 (see STONE_CURRICULA), platform gaps at their easiest level do.
 
 TWO_ROW_HALF_SPACING_M = 0.30  # row centres at y = centre +- this; ANYmal-D feet are at +-0.31 m
 STAIRS_MAX_RISE_M = 0.8  # total rise (or drop) of a stairs tile is capped at this [m]
 PYRAMID_MAX_HEIGHT_M = 0.6  # pyramids are truncated (flat top / bottom) at this height [m]
 
-# Stone curricula, piecewise linear in the difficulty d through the knots STONE_KNOTS: first the
-# gaps between few, large stones widen (d 0 -> 0.4, stones keep their size, level tops), then the
-# stones shrink and the height spread grows (0.4 -> 0.72), and from d = 0.72 (the evaluation
-# ensemble: 90 % of the stage-1 range (0, 0.8)) on, the values are those of the earlier linear
-# schedules (size, gap, spread, jitter), so the ensemble's stones and gaps are unchanged. Jitter
-# is a fraction of the gap and stone sizes do not vary while d <= 0.4: at d = 0 (level 0) every gap
-# is 4-6 cm wide, narrower than the 6.3 cm foot, and drawn as a shallow crack (harmless, as a real
-# one is); from d = 0.09 (level 1 of 10 over (0, 0.8)) on every gap is wider than the foot (at
-# least 0.8 x the nominal gap) and drawn to the pit floor. Only a difficulty in (0.007, 0.08) mixes
-# the two (gaps of 5.3-7.9 cm straddle the foot: the narrow ones are drawn deep): no level lies
-# there.
-STONE_KNOTS = (0.0, 0.4, 0.72, 1.0)
+# Stone curricula (terrain.stone_curriculum), piecewise linear in the difficulty d through their
+# knots. Both end at the same values from d = 0.72 on (the evaluation ensemble: 90 % of the
+# stage-1 range (0, 0.8)): those of the earlier linear schedules (size, gap, spread, jitter), so
+# the ensemble's stones and gaps are the same whichever curriculum a policy trained on. Jitter is
+# a fraction of the gap. At d = 0 (level 0) every gap is 4-6 cm wide, narrower than the 6.3 cm
+# foot, and drawn as a shallow crack (harmless, as a real one is); from d = 0.08 on every gap is
+# wider than the foot (at least 0.8 x the nominal gap) and drawn to the pit floor. Only a
+# difficulty in (0.007, 0.08) mixes the two (gaps of 5.3-7.9 cm straddle the foot): no level of
+# the stage-1 range lies there.
+#
+# "size_first" (the default since 2026-12-07; the paper's "dense grid stones", legged_gym's
+# stones that shrink at a fixed 0.1 m gap): the stones shrink to the ensemble's size while the
+# gaps stay 0.10 m and the tops level (d 0 -> 0.36, geometric steps of ~0.75 per level of 10 over
+# (0, 0.8)), then the gaps widen to the ensemble's (0.36 -> 0.54, with the jitter, the missing
+# stones and the two-row lateral offsets), then the tops spread (0.54 -> 0.72).
+# "gaps_first" (before; what configs saved without terrain.stone_curriculum trained on): the gaps
+# between few, large stones widen (d 0 -> 0.4, stones keep their size, level tops), then the
+# stones shrink and the height spread grows (0.4 -> 0.72): a policy met stones of the ensemble's
+# size only at level 8.
+STONE_CURRICULA = {
+    "size_first": {
+        "knots": (0.0, 0.08, 0.18, 0.27, 0.36, 0.54, 0.72, 1.0),
+        # name: {parameter: values at the knots}
+        "grid_stones": {
+            "size": (1.00, 0.76, 0.55, 0.40, 0.2976, 0.2976, 0.2976, 0.18),  # stone top [m]
+            "gap": (0.05, 0.10, 0.10, 0.10, 0.10, 0.266, 0.266, 0.35),  # nominal gap [m]
+            "dz": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.144, 0.20),  # top height spread, p-p [m]
+            "jitter": (0.10, 0.10, 0.10, 0.10, 0.10, 0.25, 0.25, 0.25),  # x gap, per axis [-]
+            "f_lo": (1.0, 0.98, 0.96, 0.94, 0.9196, 0.9196, 0.9196, 0.90),  # size x U(f_lo, 1)
+        },
+        "two_row_stones": {
+            "size": (0.80, 0.635, 0.49, 0.38, 0.2976, 0.2976, 0.2976, 0.18),
+            "gap": (0.05, 0.10, 0.10, 0.10, 0.10, 0.338, 0.338, 0.45),
+            "dz": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.108, 0.15),
+            "jitter": (0.10, 0.10, 0.10, 0.10, 0.10, 0.20, 0.20, 0.20),
+            "f_lo": (1.0, 0.98, 0.96, 0.94, 0.9196, 0.9196, 0.9196, 0.90),
+            "lateral": (0.0, 0.0, 0.0, 0.0, 0.0, 0.036, 0.036, 0.05),  # lateral jitter, +- [m]
+        },
+        "mixed_row_stones": {
+            "size": (0.90, 0.69, 0.49, 0.365, 0.2696, 0.2696, 0.2696, 0.18),  # largest top [m]
+            "gap": (0.05, 0.10, 0.10, 0.10, 0.10, 0.302, 0.302, 0.40),
+            "dz": (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.144, 0.20),
+            "jitter": (0.10, 0.10, 0.10, 0.10, 0.10, 0.25, 0.25, 0.25),
+            "f_lo": (1.0, 0.96, 0.91, 0.86, 0.806, 0.806, 0.806, 0.75),
+            "keep": (1.0, 1.0, 1.0, 1.0, 1.0, 0.892, 0.892, 0.85),  # P(a stone is present) [-]
+        },
+    },
+    "gaps_first": {
+        "knots": (0.0, 0.4, 0.72, 1.0),
+        "grid_stones": {
+            "size": (1.00, 1.00, 0.2976, 0.18),  # stone top size [m]
+            "gap": (0.05, 0.20, 0.266, 0.35),  # nominal gap between stones [m]
+            "dz": (0.0, 0.0, 0.144, 0.20),  # peak-to-peak spread of the top heights [m]
+            "jitter": (0.10, 0.10, 0.25, 0.25),  # centre jitter ~ U(+-this x gap) per axis [-]
+            "f_lo": (1.0, 1.0, 0.9196, 0.90),  # size factor ~ U(f_lo, 1) per axis [-]
+        },
+        "two_row_stones": {
+            "size": (0.80, 0.80, 0.2976, 0.18),
+            "gap": (0.05, 0.24, 0.338, 0.45),
+            "dz": (0.0, 0.0, 0.108, 0.15),
+            "jitter": (0.10, 0.10, 0.20, 0.20),
+            "f_lo": (1.0, 1.0, 0.9196, 0.90),
+            "lateral": (0.0, 0.0, 0.036, 0.05),  # lateral jitter of each stone, +- [m]
+        },
+        "mixed_row_stones": {
+            "size": (0.90, 0.90, 0.2696, 0.18),  # largest stone top; each ~ U(f_lo, 1) x size [m]
+            "gap": (0.05, 0.22, 0.302, 0.40),
+            "dz": (0.0, 0.0, 0.144, 0.20),  # low bricks dz lower, high stones dz higher [m]
+            "jitter": (0.10, 0.10, 0.25, 0.25),
+            "f_lo": (1.0, 1.0, 0.806, 0.75),
+            "keep": (1.0, 1.0, 0.892, 0.85),  # probability that a stone is present [-]
+        },
+    },
+}
+STONE_CURRICULUM_NAMES = tuple(STONE_CURRICULA)  # valid terrain.stone_curriculum values
+DEFAULT_STONE_CURRICULUM = "size_first"
+ENSEMBLE_KNOT = 0.72  # from here on every stone curriculum holds the same values
+# The default curriculum's knots and schedules (earlier code imported these names).
+STONE_KNOTS = STONE_CURRICULA[DEFAULT_STONE_CURRICULUM]["knots"]
 STONE_SCHEDULES = {
-    # name: {parameter: values at STONE_KNOTS}
-    "grid_stones": {
-        "size": (1.00, 1.00, 0.2976, 0.18),  # stone top size [m]
-        "gap": (0.05, 0.20, 0.266, 0.35),  # nominal gap between stones [m]
-        "dz": (0.0, 0.0, 0.144, 0.20),  # peak-to-peak spread of the top heights [m]
-        "jitter": (0.10, 0.10, 0.25, 0.25),  # centre jitter ~ U(+-this x gap) per axis [-]
-        "f_lo": (1.0, 1.0, 0.9196, 0.90),  # size factor ~ U(f_lo, 1) per axis [-]
-    },
-    "two_row_stones": {
-        "size": (0.80, 0.80, 0.2976, 0.18),
-        "gap": (0.05, 0.24, 0.338, 0.45),
-        "dz": (0.0, 0.0, 0.108, 0.15),
-        "jitter": (0.10, 0.10, 0.20, 0.20),
-        "f_lo": (1.0, 1.0, 0.9196, 0.90),
-        "lateral": (0.0, 0.0, 0.036, 0.05),  # lateral jitter of each stone, +- [m]
-    },
-    "mixed_row_stones": {
-        "size": (0.90, 0.90, 0.2696, 0.18),  # largest stone top; each ~ U(f_lo, 1) x size [m]
-        "gap": (0.05, 0.22, 0.302, 0.40),
-        "dz": (0.0, 0.0, 0.144, 0.20),  # low bricks dz lower, high stones dz higher [m]
-        "jitter": (0.10, 0.10, 0.25, 0.25),
-        "f_lo": (1.0, 1.0, 0.806, 0.75),
-        "keep": (1.0, 1.0, 0.892, 0.85),  # probability that a stone is present [-]
-    },
+    k: v for k, v in STONE_CURRICULA[DEFAULT_STONE_CURRICULUM].items() if k != "knots"
 }
 
 
@@ -116,6 +161,7 @@ class TileSpec:
       pit_z_m: pit floor z [m]; also the Heightfield floor (elevation 0).
       z_range_m: heights are clipped to [pit_z_m, pit_z_m + z_range_m] [m].
       foot_radius_m: foot sphere radius that sets how cracks are drawn (see Cracks above) [m].
+      stone_curriculum: which of STONE_CURRICULA the stone types follow in d.
     """
 
     length_m: float = 6.0
@@ -126,6 +172,7 @@ class TileSpec:
     pit_z_m: float = -1.0
     z_range_m: float = 2.0
     foot_radius_m: float = constants.FOOT_RADIUS_M
+    stone_curriculum: str = DEFAULT_STONE_CURRICULUM
 
     def __post_init__(self):
         config_check.check_fields(  # the terrain.* rules, held once (foottof.config_check)
@@ -138,6 +185,7 @@ class TileSpec:
                 "goal_length_m": self.goal_length_m,
                 "pit_z_m": self.pit_z_m,
                 "z_range_m": self.z_range_m,
+                "stone_curriculum": self.stone_curriculum,
             },
         )
         config_check.check_fields("env.model", {"foot_radius_m": self.foot_radius_m})
@@ -197,6 +245,8 @@ class TileSpec:
             goal_length_m=float(cfg.goal_length_m),
             pit_z_m=float(cfg.pit_z_m),
             z_range_m=float(cfg.z_range_m),
+            # a config saved before the field existed trained on "gaps_first" (foottof.renames)
+            stone_curriculum=str(read_added(cfg, "terrain.stone_curriculum")),
         )
 
 
@@ -208,12 +258,16 @@ def _lerp(easy: float, hard: float, d: jax.Array) -> jax.Array:
     return easy + (hard - easy) * d
 
 
-def stone_params(name: str, d) -> dict:
-    """The stone schedule of ``name`` (STONE_SCHEDULES) at difficulty ``d`` (piecewise linear)."""
-    return {
-        k: jp.interp(d, jp.asarray(STONE_KNOTS), jp.asarray(v, jp.float32))
-        for k, v in STONE_SCHEDULES[name].items()
-    }
+def stone_params(name: str, d, curriculum: str = DEFAULT_STONE_CURRICULUM) -> dict:
+    """The stone schedule of ``name`` in ``curriculum`` (STONE_CURRICULA) at difficulty ``d``
+    (piecewise linear between the curriculum's knots; exactly a knot's values at a knot)."""
+    if curriculum not in STONE_CURRICULA:
+        raise ValueError(
+            f"stone curriculum {curriculum!r}; valid choices: {', '.join(STONE_CURRICULUM_NAMES)}"
+        )
+    table = STONE_CURRICULA[curriculum]
+    knots = jp.asarray(table["knots"], jp.float32)
+    return {k: jp.interp(d, knots, jp.asarray(v, jp.float32)) for k, v in table[name].items()}
 
 
 def crack_sag_m(width_m, foot_radius_m: float):
@@ -316,7 +370,7 @@ def _finish(
 
 def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     """Regular grid of square stones over the pit, jittered, with random top heights."""
-    sp = stone_params("grid_stones", d)
+    sp = stone_params("grid_stones", d, spec.stone_curriculum)
     size, gap, dz, jit = sp["size"], sp["gap"], sp["dz"], sp["jitter"]
     pitch = size + gap
     x, y = _grid(spec)
@@ -341,7 +395,7 @@ def _grid_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
 
 def _two_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     """Two rows of square stones along x (left and right feet), independently staggered."""
-    sp = stone_params("two_row_stones", d)
+    sp = stone_params("two_row_stones", d, spec.stone_curriculum)
     size, gap, dz, jit, lateral = sp["size"], sp["gap"], sp["dz"], sp["jitter"], sp["lateral"]
     pitch = size + gap
     x, y = _grid(spec)
@@ -414,7 +468,7 @@ def _platform_gap(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
 
 def _mixed_row_stones(key: jax.Array, d: jax.Array, spec: TileSpec) -> jax.Array:
     """Rows of stones across y, each row randomly shifted; mixed sizes, bricks and high stones."""
-    sp = stone_params("mixed_row_stones", d)
+    sp = stone_params("mixed_row_stones", d, spec.stone_curriculum)
     size, gap, dz, jit, keep = sp["size"], sp["gap"], sp["dz"], sp["jitter"], sp["keep"]
     pitch = size + gap
     x, y = _grid(spec)
@@ -541,11 +595,12 @@ def generate_tile(
     as static arguments under ``jax.jit``). A concrete difficulty outside [0, 1] raises ValueError;
     a traced difficulty is clipped to [0, 1].
 
-    Difficulty 0 -> 1: stepping stones follow STONE_SCHEDULES (piecewise linear): gaps between
-    large stones (grid 1.0 m, two-row 0.8 m, mixed 0.9 m) widen from 5 cm cracks (d 0 -> 0.4), then the
-    stones shrink to 0.18 m and the height spread grows (stones 0 -> 0.15-0.20 m, mixed
-    bricks/high stones +-0.20 m); from d = 0.72 on they match the earlier linear schedules (grid
-    gaps -> 0.35 m, two-row -> 0.45 m, mixed -> 0.40 m). The other types are linear in d:
+    Difficulty 0 -> 1: stepping stones follow ``spec.stone_curriculum`` (STONE_CURRICULA,
+    piecewise linear). "size_first": large stones (grid 1.0 m, two-row 0.8 m, mixed 0.9 m)
+    shrink to the ensemble's 0.27-0.30 m at 0.10 m gaps (d 0 -> 0.36), then the gaps widen
+    (-> 0.54), then the tops spread (-> 0.72); "gaps_first": the gaps widen first, the stones
+    shrink last. From d = 0.72 on both match the earlier linear schedules (stones -> 0.18 m;
+    grid gaps -> 0.35 m, two-row -> 0.45 m, mixed -> 0.40 m). The other types are linear in d:
     platform gaps widen (0.05 -> 0.75 m), box heights spread (0.04 -> 0.30 m), the beam narrows
     (0.80 -> 0.16 m), stairs steepen (rise 0.05 -> 0.25 m, tread 0.45 -> 0.28 m) and pyramid faces
     steepen (slope 0.05 -> 0.45). Gaps narrower than the foot are drawn as shallow cracks (see

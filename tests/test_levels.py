@@ -397,3 +397,24 @@ def test_failures_on_the_training_map_cover_every_column_type():
     over[[0, 4]] = (1, 3)  # two of them with feet over a gap: counted once each
     last = format_reasons(f.cause, f.types, f.reasons, over).splitlines()[-1]
     assert last.endswith("diverged 0; a foot over a gap 2")
+
+
+def test_smallest_stone_is_the_size_at_the_highest_level_holding_a_share():
+    """Hand values: 10 levels over (0, 0.8); level 4 is d = 0.8 x 4 / 9 = 0.3556. On size first
+    that lies between the knots 0.27 (grid 0.40 m) and 0.36 (0.2976 m): 0.40 - 0.1024 x
+    0.0856 / 0.09 = 0.3026 m; on gaps first the grid stones keep 1.0 m until d = 0.4. One env
+    at level 9 (under 5 % of the type's) does not count; two-row stones with no env are left out."""
+    from configs import _terrain
+
+    terrain = _terrain.get_section()
+    grid = np.zeros(10, int)
+    grid[[2, 4, 9]] = (40, 60, 1)
+    counts = {"grid_stones": grid, "two_row_stones": np.zeros(10, int), "platform_gap": grid}
+    sizes = levels.smallest_stones(terrain, 1, counts)
+    assert set(sizes) == {"grid_stones"}
+    assert sizes["grid_stones"] == pytest.approx(0.40 - 0.1024 * (0.8 * 4 / 9 - 0.27) / 0.09, 1e-4)
+    terrain.stone_curriculum = "gaps_first"
+    assert levels.smallest_stones(terrain, 1, counts)["grid_stones"] == pytest.approx(1.0)
+    grid[9] = 10  # now 9 % of the type's envs: level 9, d = 0.8, past the shared knot 0.72
+    both = levels.smallest_stones(terrain, 1, counts)["grid_stones"]
+    assert both == pytest.approx(0.2976 + (0.18 - 0.2976) * 0.08 / 0.28, 1e-4)

@@ -90,6 +90,35 @@ def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None =
     return {n: np.asarray(flat[f"leaf_{leaf_names.index(n):04d}"]) for n in names}
 
 
+def run_terrain(run_dir: str) -> tuple[ml_collections.ConfigDict, int]:
+    """(terrain section, stage) of ``run_dir``'s saved config (renamed fields migrated)."""
+    with open(os.path.join(run_dir, "config.json")) as f:
+        cfg = ml_collections.ConfigDict(renames.migrate_config_dict(json.load(f)))
+    return cfg.terrain, int(cfg.stage)
+
+
+def smallest_stones(
+    terrain, stage: int, counts: dict[str, np.ndarray], share: float = 0.05
+) -> dict[str, float]:
+    """Nominal stone size [m] at the highest level that holds at least ``share`` of the type's
+    envs, per stone type of ``counts``: the smallest stone the type trains on (a few envs
+    promoted once do not count). Its curriculum: the run's terrain.stone_curriculum,
+    "gaps_first" where the run was saved without one."""
+    from foottof.terrain.tiles import STONE_TYPES, stone_params
+
+    curriculum = str(renames.read_added(terrain, "terrain.stone_curriculum"))
+    ranges = terrain[f"stage{stage}_difficulty"]
+    out = {}
+    for name, c in counts.items():
+        if name not in STONE_TYPES or c.sum() == 0:
+            continue
+        top = int(np.flatnonzero(c >= share * c.sum())[-1])
+        lo, hi = ranges[name]
+        d = lo + (hi - lo) * top / max(len(c) - 1, 1)
+        out[name] = float(stone_params(name, d, curriculum)["size"])
+    return out
+
+
 def level_counts(run_dir: str, step: int | None = None) -> dict[str, np.ndarray]:
     """Envs per curriculum level, per terrain type, in checkpoint ``step`` of ``run_dir``.
 
@@ -97,9 +126,8 @@ def level_counts(run_dir: str, step: int | None = None) -> dict[str, np.ndarray]
       {terrain type: (num_levels,) int counts}, in the order of the map's columns; the counts of
       all types add up to the run's number of envs.
     """
-    with open(os.path.join(run_dir, "config.json")) as f:
-        cfg = ml_collections.ConfigDict(renames.migrate_config_dict(json.load(f)))
-    spec = TerrainMapSpec.from_config(cfg.terrain, int(cfg.stage))
+    terrain, stage = run_terrain(run_dir)
+    spec = TerrainMapSpec.from_config(terrain, stage)
     leaves = read_rollout_leaves(run_dir, (LEVEL_LEAF, COL_LEAF), step)
     level, col = leaves[LEVEL_LEAF].reshape(-1), leaves[COL_LEAF].reshape(-1)
     if col.min() < 0 or col.max() >= spec.num_cols:
@@ -116,13 +144,18 @@ def mean_level(counts: np.ndarray) -> float:
     return float(np.dot(counts, np.arange(len(counts))) / max(counts.sum(), 1))
 
 
-def format_table(counts: dict[str, np.ndarray]) -> str:
-    """Plain-text table: one row per type, envs per level, then the type's mean level."""
+def format_table(counts: dict[str, np.ndarray], stones: dict[str, float] | None = None) -> str:
+    """Plain-text table: one row per type, envs per level, then the type's mean level (and,
+    given ``stones``, the smallest stone it trains on [m])."""
     num_levels = len(next(iter(counts.values())))
     head = f"{'terrain type':<18}" + "".join(f"{i:>5}" for i in range(num_levels)) + "   mean"
+    head += "  smallest stone [m]" if stones is not None else ""
     lines = [head]
     for name, c in counts.items():
-        lines.append(f"{name:<18}" + "".join(f"{int(v):>5}" for v in c) + f"  {mean_level(c):5.2f}")
+        line = f"{name:<18}" + "".join(f"{int(v):>5}" for v in c) + f"  {mean_level(c):5.2f}"
+        if stones is not None and name in stones:
+            line += f"  {stones[name]:18.2f}"
+        lines.append(line)
     return "\n".join(lines)
 
 
@@ -134,10 +167,13 @@ def main(argv: list[str] | None = None) -> None:
     try:
         step = resolve_step(a.run_dir, a.step)
         counts = level_counts(a.run_dir, step)
+        terrain, stage = run_terrain(a.run_dir)
+        stones = smallest_stones(terrain, stage, counts)
     except (FileNotFoundError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
-    print(f"envs per curriculum level, checkpoint {step}")
-    print(format_table(counts))
+    curriculum = renames.read_added(terrain, "terrain.stone_curriculum")
+    print(f"envs per curriculum level, checkpoint {step} (stone curriculum {curriculum})")
+    print(format_table(counts, stones))
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ _RUN_DIR = flags.DEFINE_string(
 def main(argv):
     del argv
     logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint write at INFO
-    from foottof import config_check
+    from foottof import config_check, files
     from foottof.ppo import distributed
     from foottof.ppo import run_dir as run_dirs
 
@@ -50,7 +50,9 @@ def main(argv):
         run_dir, latest = run_dirs.resolve_run_dir(
             t.run_root, t.run_name, _RUN_DIR.value, _RESUME.value
         )
-    except (ValueError, FileNotFoundError, FileExistsError) as e:
+        if os.path.isdir(run_dir) and (setup is None or setup.process_id == 0):
+            files.FolderLock(run_dir, "train.py").acquire()  # held until exit (runner.run too)
+    except (ValueError, FileNotFoundError, FileExistsError, files.FolderLocked) as e:
         sys.exit(f"error: {e}")
     if _RESUME.value:  # a resumed run keeps the stone curriculum it trained on
         overrides = config_flags.get_override_values(flags.FLAGS["config"])
@@ -74,6 +76,8 @@ def main(argv):
         )
     except ValueError as e:
         sys.exit(f"error: {e}")
+    except distributed.ProcessLost as e:  # a peer never joined: stop now, as in training
+        distributed.exit_at_once(str(e))
     what = "continuing" if _RESUME.value else "new run"
     print(f"[train] {what} in {run_dir}" + (f" ({latest} links to it)" if latest else ""))
     from foottof.envs import make_training_env
@@ -103,6 +107,8 @@ def main(argv):
         FileExistsError,
         runner.NonFiniteError,
         CheckpointUnreadable,
+        files.FolderLocked,
+        files.DiskFull,
     ) as e:
         sys.exit(f"error: {e}")
     except distributed.ProcessLost as e:  # another process died: stop now, without waiting for it

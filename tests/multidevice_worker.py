@@ -12,6 +12,7 @@ python tests/multidevice_worker.py MODE OUT.
                           opt_state, normalizer); another process lost: train.py's one line and
                           exit status
   collectives             all-gathers over all processes until stopped (with JAX_* variables)
+  stall                   starts the runtime as train.py does, then waits (a long first compile)
 """
 
 import os
@@ -141,10 +142,26 @@ def collectives() -> None:
         time.sleep(0.1)
 
 
+def stall() -> None:
+    """train.py's start-up, then 10 min without a collective (the first compile of a big env):
+    only the heartbeats can tell that another process is gone."""
+    import time
+
+    from foottof.ppo import distributed
+
+    try:
+        distributed.initialize()
+    except distributed.ProcessLost as e:  # as train.py
+        distributed.exit_at_once(str(e))
+    print("[worker] started", flush=True)
+    time.sleep(600)
+
+
 if __name__ == "__main__":
     sys.path[:0] = [os.path.dirname(TESTS), TESTS]  # the repo (configs, foottof) and helpers
     mode, args = sys.argv[1], sys.argv[2:]
     if mode == "resume":
         run(*args, resume=True)
     else:
-        {"update": update, "run": run, "collectives": collectives}[mode](*args)
+        modes = {"update": update, "run": run, "collectives": collectives, "stall": stall}
+        modes[mode](*args)

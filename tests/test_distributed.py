@@ -484,3 +484,67 @@ def test_hung_process_ends_the_others_within_the_heartbeat_timeout():  # ~20 s
             p.communicate()
     assert r.returncode != 0 and "heartbeat" in r.stderr, (r.returncode, r.stderr[-3000:])
     assert stop_s < 15, stop_s  # measured: 5.0 and 5.9 s; JAX's default would be 100 s
+
+
+# ----------------------------------------------------------- a process lost before the loop
+STARTUP_LINE = re.compile(
+    r"\[distributed\] not all 2 processes joined within 3 s at start-up \((.+)\); process 0 "
+    r"stops\. Start all 2 again \(FOOTTOF_HEARTBEAT_TIMEOUT_S sets this wait\)"
+)
+
+
+def test_a_process_that_never_joins_stops_the_start_up_in_one_line(tmp_path):
+    """train.py as process 0 of 2 whose process 1 never starts (lost before it joined): after
+    the heartbeat timeout (3 s here; JAX's own start-up wait is 300 s) it stops with one line
+    and EXIT_PROCESS_LOST, as training does, before any run folder is written."""
+    cmd = [sys.executable, "train.py", "--config", "configs/smoke.py"]
+    env = _env(
+        JAX_COORDINATOR_ADDRESS=f"localhost:{_free_port()}",
+        JAX_NUM_PROCESSES="2",
+        JAX_PROCESS_ID="0",
+        FOOTTOF_HEARTBEAT_TIMEOUT_S="3",
+    )
+    t0 = time.time()
+    r = subprocess.run(
+        [*cmd, "--run_dir", str(tmp_path / "run")],
+        cwd=ROOT,
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
+    assert r.returncode == distributed.EXIT_PROCESS_LOST, (r.returncode, r.stderr[-3000:])
+    lines = [line for line in r.stderr.strip().splitlines() if line.startswith("[distributed]")]
+    assert len(lines) == 1 and STARTUP_LINE.fullmatch(lines[0]), r.stderr[-3000:]
+    assert "Traceback" not in r.stderr and "stack trace" not in r.stderr
+    assert r.stderr.strip().splitlines()[-1] == lines[0]
+    assert time.time() - t0 < 60
+    assert not os.path.exists(tmp_path / "run")
+
+
+def test_a_process_lost_during_the_first_compile_stops_the_others_in_one_line():
+    """2 processes past start-up, then without a collective for minutes (as in a first compile):
+    process 1 is killed. Process 0 stops within the heartbeat timeout (6 s here) with one line
+    and EXIT_PROCESS_LOST (its own heartbeats, foottof.ppo.distributed.PeerWatch, notice at half
+    the timeout), not JAX's abort and stack dump at the full timeout."""
+    procs = _start([sys.executable, WORKER, "stall"], 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="6")
+    try:
+        for p in procs:
+            line = p.stdout.readline()
+            assert line.startswith("[worker] started"), _finish(p, 30).stderr[-3000:]
+        procs[1].send_signal(signal.SIGKILL)
+        killed = time.time()
+        r = _finish(procs[0], timeout=60)
+        stop_s = time.time() - killed
+    finally:
+        for p in procs:
+            p.kill()
+            p.communicate()
+    assert r.returncode == distributed.EXIT_PROCESS_LOST, (r.returncode, r.stderr[-3000:])
+    assert r.stderr.strip().splitlines()[-1] == (
+        "[distributed] process 1 of 2 sent no heartbeat for 3 s (killed, hung or its host gone); "
+        "process 0 stops. Start all 2 again as before, with --resume where the run has a "
+        "complete checkpoint"
+    ), r.stderr[-3000:]
+    assert "stack trace" not in r.stderr and "Traceback" not in r.stderr
+    assert stop_s < 6, stop_s  # within the heartbeat timeout

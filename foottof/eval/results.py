@@ -13,6 +13,7 @@ import os
 import numpy as np
 
 from foottof import renames
+from foottof.files import write_atomic  # noqa: F401  (re-exported: cells, analysis, teacher)
 
 SCHEMA_VERSION = 4  # 2: adds "ensemble" (difficulty, stone share, actions); 3: mean_speed_mps;
 # 4: the ensemble records the action std cap of sampled actions (older files: migrate_ensemble)
@@ -327,25 +328,6 @@ def format_table(rows: list[dict]) -> str:
             f"[{r['ci_low']:.3f},{r['ci_high']:.3f}]{r['mean_speed_mps']:>10.3f}{r['falls']:>7d}"
         )
     return "\n".join(lines)
-
-
-def write_atomic(files: dict[str, bytes]) -> None:
-    """Writes every {path: bytes} to path.tmp first, then renames all (no partial outputs)."""
-    tmps = []
-    try:
-        for path, data in files.items():
-            os.makedirs(os.path.dirname(os.path.abspath(path)), exist_ok=True)
-            tmp = path + ".tmp"
-            with open(tmp, "wb") as f:
-                f.write(data)
-            tmps.append((tmp, path))
-    except BaseException:
-        for tmp, _ in tmps:
-            if os.path.exists(tmp):
-                os.remove(tmp)
-        raise
-    for tmp, path in tmps:
-        os.replace(tmp, path)
 
 
 def result_basename(source: str, perturbation: str) -> str:

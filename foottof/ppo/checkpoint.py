@@ -14,6 +14,12 @@ cause); one whose leaves differ from the model *does not fit* (:class:`Checkpoin
 ValueError). ``Checkpointer.restore`` falls back to the newest
 checkpoint that reads; checkpoints written before the record existed are checked by reading them
 only. A network with more inputs than the saved one restores it grown (foottof.ppo.input_growth).
+
+A full disk. A save that fails for want of space raises :class:`foottof.files.DiskFull` (one
+line: the run folder, the space a checkpoint needs and the last complete checkpoint) after
+removing what it wrote of the failed one (orbax's ``<step>.orbax-checkpoint-tmp*`` folder, which
+no restore reads); the checkpoints before it are untouched (orbax deletes old ones only after a
+save completes).
 """
 
 import contextlib
@@ -27,6 +33,7 @@ import jax
 import numpy as np
 import orbax.checkpoint as ocp
 
+from foottof import files
 from foottof.ppo import input_growth as growth
 from foottof.ppo.integrity import integrity_problem, write_integrity
 from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
@@ -206,11 +213,41 @@ class Checkpointer:
             flat, manifest[item] = _flatten(_sub(state, item))
             args[item] = ocp.args.StandardSave(flat)
         args["manifest"] = ocp.args.JsonSave(manifest)
-        self._manager.save(step, args=ocp.args.Composite(**args), force=True)
-        self._manager.wait_until_finished()
-        if jax.process_index() == 0:  # one writer: orbax has gathered every process's files
-            write_integrity(os.path.join(self.directory, str(step)))
+        try:
+            self._manager.save(step, args=ocp.args.Composite(**args), force=True)
+            self._manager.wait_until_finished()
+            if jax.process_index() == 0:  # one writer: orbax has gathered every process's files
+                write_integrity(os.path.join(self.directory, str(step)))
+        except Exception as e:
+            if not files.is_disk_full(e):
+                raise
+            raise files.DiskFull(self._disk_full(step, state)) from None
         return step
+
+    def checkpoint_bytes(self, state: TrainState) -> int:
+        """Bytes of the arrays a checkpoint of `state` holds (what a save needs, about)."""
+        items = [i for i in ITEMS if i != "rollout" or self.save_env_state]
+        leaves = [x for item in items for x in jax.tree.leaves(_sub(state, item))]
+        return sum(int(np.size(x)) * np.dtype(x.dtype).itemsize for x in leaves)
+
+    def _disk_full(self, step: int, state: TrainState) -> str:
+        """Removes what a failed save of `step` wrote (its orbax temporary folders; a folder
+        orbax already renamed to `step` is complete and stays) and says so in one line."""
+        if jax.process_index() == 0:
+            for name in os.listdir(self.directory):
+                if name.startswith(f"{step}.orbax-checkpoint-tmp"):
+                    shutil.rmtree(os.path.join(self.directory, name), ignore_errors=True)
+        self._manager.reload()
+        needed = self.checkpoint_bytes(state)
+        last = self._manager.latest_step()
+        run_dir = os.path.dirname(self.directory)
+        then = (
+            f"checkpoint {last} is the last complete one. Free space there, then continue "
+            f"from it (train.py --resume --run_dir {run_dir})"
+            if last is not None
+            else "no checkpoint is complete: free space there and start the run again"
+        )
+        return files.disk_full_message(run_dir, f"saving checkpoint {step}", needed, then)
 
     def latest_step(self) -> int | None:
         return self._manager.latest_step()

@@ -14,12 +14,17 @@ own detection would start the runtime there and keep one GPU only, so we do not 
 dead (HEARTBEAT_TIMEOUT_S).
 
 When a process dies the others stop (`ProcessLost`, `lost_process_message`, `exit_at_once`): see
-README_multihost.md, "When a process dies".
+README_multihost.md, "When a process dies". From start-up on (`initialize`) each process also
+watches the others' heartbeats of its own (`PeerWatch`): one silent for half the heartbeat
+timeout, or a start-up that not all join within it, ends the others with one line and status
+EXIT_PROCESS_LOST, before JAX's own abort (a stack dump) at the full timeout.
 """
 
 import os
 import socket
 import sys
+import threading
+import time
 from collections.abc import Mapping
 from typing import NamedTuple, NoReturn
 
@@ -129,14 +134,16 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
     """Starts JAX's distributed runtime if the environment asks for it (see `parse_env`).
 
     Call it before any other JAX call (it must come before the backend starts). CPU processes
-    talk through gloo collectives. Blocks until all processes have joined (JAX's timeout, 5 min).
-    A process silent for Setup.heartbeat_timeout_s counts as dead (HEARTBEAT_TIMEOUT_S).
+    talk through gloo collectives. Blocks until all processes have joined, at most
+    Setup.heartbeat_timeout_s; then starts this process's `PeerWatch`.
 
     Returns:
       The Setup, or None for a single process (nothing was started).
 
     Raises:
       ValueError: a bad setup, one line (`parse_env`), or JAX's process count differs from it.
+      ProcessLost: not every process joined within the heartbeat timeout (one line; end the
+        process with `exit_at_once`).
     """
     setup = parse_env(environ)
     if setup is None:
@@ -145,18 +152,130 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
 
     if jax.config.jax_cpu_collectives_implementation in (None, "none"):  # older JAX: none
         jax.config.update("jax_cpu_collectives_implementation", "gloo")
-    jax.distributed.initialize(
-        coordinator_address=setup.coordinator_address,
-        num_processes=setup.num_processes,
-        process_id=setup.process_id,
-        heartbeat_timeout_seconds=setup.heartbeat_timeout_s,
+
+    def lost(cause: str) -> str:
+        return (
+            f"[distributed] not all {setup.num_processes} processes joined within "
+            f"{setup.heartbeat_timeout_s} s at start-up ({cause}); process {setup.process_id} "
+            f"stops. Start all {setup.num_processes} again ({HEARTBEAT_VAR} sets this wait)"
+        )
+
+    # JAX's own start-up timeout ends in its abort (a stack dump): this timer comes first.
+    joined = threading.Event()
+    timer = threading.Thread(
+        target=lambda: (
+            joined.wait(setup.heartbeat_timeout_s)
+            or exit_at_once(lost("no answer from all of them"))
+        ),
+        daemon=True,
     )
+    timer.start()
+    try:
+        jax.distributed.initialize(
+            coordinator_address=setup.coordinator_address,
+            num_processes=setup.num_processes,
+            process_id=setup.process_id,
+            initialization_timeout=2 * setup.heartbeat_timeout_s,
+            heartbeat_timeout_seconds=setup.heartbeat_timeout_s,
+        )
+    except Exception as e:  # JaxRuntimeError: DEADLINE_EXCEEDED, UNAVAILABLE, ...
+        raise ProcessLost(lost(_first_line(e))) from None
+    finally:
+        joined.set()
     if jax.process_count() != setup.num_processes:
         raise ValueError(
             f"jax.process_count()={jax.process_count()} after initialize, but the setup "
             f"({setup.source}) asked for {setup.num_processes} processes"
         )
+    if setup.num_processes > 1:
+        from jax._src import distributed as jax_distributed  # the runtime's key-value client
+
+        PeerWatch(
+            jax_distributed.global_state.client,
+            setup.process_id,
+            setup.num_processes,
+            setup.heartbeat_timeout_s / 2,
+        ).start()
     return setup
+
+
+def _first_line(error: BaseException, limit: int = 200) -> str:
+    cause = (str(error).strip().splitlines() or [type(error).__name__])[0]
+    return cause if len(cause) <= limit else cause[: limit - 3] + "..."
+
+
+BEAT_PREFIX = "foottof/beat/"  # key-value keys of PeerWatch: BEAT_PREFIX + process id
+BEAT_DONE = "done"  # the beat of a process that ended normally: no longer watched
+
+
+class PeerWatch(threading.Thread):
+    """Heartbeats of our own through the runtime's key-value store, from start-up to exit.
+
+    Every `silence_s / 10` s this process bumps its counter under BEAT_PREFIX + id and reads the
+    others'. A counter that has not moved for `silence_s` (half JAX's heartbeat timeout, so
+    this comes first), or a store that stops answering (process 0, its host, is gone), ends the
+    process with one line and EXIT_PROCESS_LOST: during start-up, the first compile, a restore,
+    a checkpoint's barriers or the training loop alike (a killed process is usually noticed
+    sooner there, by the next collective: ProcessLost). At a normal exit the beat becomes
+    BEAT_DONE (an atexit hook, run before JAX's shutdown), so the others stop watching it.
+    """
+
+    def __init__(self, client, process_id: int, num_processes: int, silence_s: float):
+        super().__init__(name="foottof-peer-watch", daemon=True)
+        self.client, self.me, self.n = client, process_id, num_processes
+        self.silence_s = float(silence_s)
+        self._stop = threading.Event()
+
+    def _lost(self, what: str) -> None:
+        if not self._stop.is_set():
+            exit_at_once(
+                f"[distributed] {what}; process {self.me} stops. Start all {self.n} again as "
+                f"before, with --resume where the run has a complete checkpoint"
+            )
+
+    def run(self) -> None:
+        seen = {p: (None, time.monotonic()) for p in range(self.n) if p != self.me}
+        beat = 0
+        while not self._stop.wait(self.silence_s / 10):
+            try:
+                self.client.key_value_set(f"{BEAT_PREFIX}{self.me}", str(beat), True)
+                values = {
+                    k.rsplit("/", 1)[-1]: v for k, v in self.client.key_value_dir_get(BEAT_PREFIX)
+                }
+            except Exception as e:
+                self._lost(f"process 0 of {self.n} (the coordinator) stopped answering "
+                           f"({_first_line(e)})")  # fmt: skip
+                return
+            beat += 1
+            now = time.monotonic()
+            for p, (value, since) in list(seen.items()):
+                new = values.get(str(p))
+                if new == BEAT_DONE:
+                    del seen[p]
+                elif new != value:
+                    seen[p] = (new, now)
+                elif now - since > self.silence_s:
+                    self._lost(
+                        f"process {p} of {self.n} sent no heartbeat for {self.silence_s:g} s "
+                        f"(killed, hung or its host gone)"
+                    )
+                    return
+
+    def start(self) -> None:
+        import atexit
+
+        super().start()
+        atexit.register(self.stop)
+
+    def stop(self) -> None:
+        """Ends the watch and tells the others this process ended normally."""
+        if self._stop.is_set():
+            return
+        self._stop.set()
+        try:
+            self.client.key_value_set(f"{BEAT_PREFIX}{self.me}", BEAT_DONE, True)
+        except Exception:  # the runtime is gone already: nothing to tell
+            pass
 
 
 def check_num_envs(
@@ -219,7 +338,7 @@ def lost_process_message(
     Args:
       error: the runtime error that noticed it (its first line is quoted).
       process_id, num_processes: this process and the run's count.
-      iteration: the last iteration this process finished.
+      iteration: the last iteration this process finished (None: before the training loop).
       run_dir: the run folder (`--run_dir`).
       checkpoint: the newest complete checkpoint in it (None: none).
     """
@@ -227,8 +346,7 @@ def lost_process_message(
         other = f"process {1 - process_id} of 2"
     else:
         other = f"another of the {num_processes} processes"
-    cause = (str(error).strip().splitlines() or [type(error).__name__])[0]
-    cause = cause if len(cause) <= 200 else cause[:197] + "..."
+    cause = _first_line(error)
     if checkpoint is None:
         then = "No checkpoint is complete: start all of them again without --resume"
     else:
@@ -237,7 +355,9 @@ def lost_process_message(
             f"continue from iteration {checkpoint}, the last complete checkpoint"
         )
     return (
-        f"[distributed] {other} stopped responding after iteration {iteration} ({cause}); "
+        f"[distributed] {other} stopped responding "
+        + ("before the training loop" if iteration is None else f"after iteration {iteration}")
+        + f" ({cause}); "
         f"process {process_id} stops. {then}"
     )
 

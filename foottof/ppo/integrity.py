@@ -11,6 +11,7 @@ import hashlib
 import json
 import os
 
+from foottof.files import write_atomic
 from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 
 INTEGRITY_FILE = "foottof_files.json"  # in each checkpoint's step folder: sizes and SHA-256
@@ -27,7 +28,7 @@ def _file_digests(step_dir: str) -> dict[str, list]:
         for f in sorted(files):
             path = os.path.join(root, f)
             rel = os.path.relpath(path, step_dir)
-            if rel in (INTEGRITY_FILE, INTEGRITY_FILE + ".tmp"):
+            if rel.startswith(INTEGRITY_FILE):  # the record, or its temporary while written
                 continue
             out[rel] = [os.path.getsize(path), _sha256(path)]
     return out
@@ -36,10 +37,8 @@ def _file_digests(step_dir: str) -> dict[str, list]:
 def write_integrity(step_dir: str) -> None:
     """Records the size and SHA-256 of every file of a finished checkpoint (atomic write)."""
     files = _file_digests(step_dir)
-    tmp = os.path.join(step_dir, INTEGRITY_FILE + ".tmp")
-    with open(tmp, "w") as f:
-        json.dump({"version": 1, "files": files}, f, indent=0)
-    os.replace(tmp, os.path.join(step_dir, INTEGRITY_FILE))
+    record = json.dumps({"version": 1, "files": files}, indent=0)
+    write_atomic({os.path.join(step_dir, INTEGRITY_FILE): record.encode()})
 
 
 def policy_digest(path: str) -> str:

@@ -1,6 +1,7 @@
 """Python training loop: run dir, config, logs, checkpoints, resume, NaN guard, Ctrl-C."""
 
 import csv
+import io
 import json
 import math
 import os
@@ -12,7 +13,7 @@ import jax.numpy as jp
 import ml_collections
 import numpy as np
 
-from foottof import renames
+from foottof import files, renames
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import distributed, teacher
 from foottof.ppo import run_dir as run_dirs
@@ -119,11 +120,17 @@ class _Logs:
             self.fields = list(row)
         elif missing := [k for k in row if k not in self.fields]:
             self._add_columns(missing)
-        with open(self.path, "a", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=self.fields, extrasaction="ignore")
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=self.fields, extrasaction="ignore")
+        if new:
+            w.writeheader()
+        w.writerow(row)
+        try:
+            files.append_whole(self.path, buf.getvalue())  # a full disk leaves no torn row
+        except OSError:
             if new:
-                w.writeheader()
-            w.writerow(row)
+                self.fields = None
+            raise
         if self.writer is not None:
             for k, v in row.items():
                 if k != "iteration" and math.isfinite(v):
@@ -152,23 +159,19 @@ def _write_config(cfg: ml_collections.ConfigDict, run_dir: str) -> None:
         changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
         if changed:
             print(f"[runner] config differs from the saved one in sections {changed}; overwriting")
-    tmp = path + ".tmp"
-    with open(tmp, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
-    with open(os.path.join(run_dir, "config.yaml"), "w") as f:
-        f.write(cfg.to_yaml())
+    files.write_atomic(
+        {path: text.encode(), os.path.join(run_dir, "config.yaml"): cfg.to_yaml().encode()}
+    )
 
 
 def _rewrite_csv(path: str, fields: list[str], rows: list[dict]) -> None:
     """Atomically replaces the CSV at ``path`` with ``rows`` under ``fields`` (missing cells
     empty, keys outside ``fields`` dropped)."""
-    tmp = path + ".tmp"
-    with open(tmp, "w", newline="") as f:
-        w = csv.DictWriter(f, fieldnames=fields, restval="", extrasaction="ignore")
-        w.writeheader()
-        w.writerows(rows)
-    os.replace(tmp, path)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=fields, restval="", extrasaction="ignore")
+    w.writeheader()
+    w.writerows(rows)
+    files.write_atomic({path: buf.getvalue().encode()})
 
 
 WALL_COLUMN = "time/total_h"  # cumulative wall-clock hours of the run, over all resumed chunks
@@ -263,6 +266,12 @@ def run(
         during training (one line naming the checkpoint to resume from); end this process with
         distributed.exit_at_once, not a normal exit, which would wait for the dead process.
       KeyboardInterrupt: re-raised after saving a checkpoint of the last finished iteration.
+      foottof.files.FolderLocked: another live process writes run_dir (one line, its pid); this
+        call wrote nothing. Process 0 holds the lock (run_dir/.foottof.lock) while it runs; one
+        left by a killed process is taken over (a line says so).
+      foottof.files.DiskFull: the disk filled (one line: run_dir, the space a checkpoint needs,
+        the last complete checkpoint); no partial checkpoint or torn metrics row is left, and a
+        resume continues bit-exactly once there is space.
     """
     cfg = _prepare_cfg(cfg)
     if resume and init_from:
@@ -279,6 +288,11 @@ def run(
         )
     main = jax.process_index() == 0  # only process 0 writes config, logs and progress lines
     created = not os.path.exists(run_dir)
+    lock = files.FolderLock(run_dir, "train.py") if main else None
+    if lock is not None:
+        lock.acquire()  # FolderLocked: another live writer; nothing written
+        if lock.took_over_pid is not None:
+            print(f"[runner] took over {lock.path} from pid {lock.took_over_pid} (not running)")
     os.makedirs(run_dir, exist_ok=True)
     linked, previous = False, None
     if latest_link and main:
@@ -290,7 +304,24 @@ def run(
         if isinstance(env, TeacherEnv) and renames.read_added(cfg.train, "train.teacher"):
             teacher.record_teacher(run_dir, cfg, env, resume)  # teacher.json: pins the teacher
         return _run(cfg, env, run_dir, resume, init_from, on_iteration, main, init_params)
+    except Exception as e:  # a collective of start-up, restore or compile failed: a peer is gone
+        if isinstance(e, distributed.ProcessLost) or jax.process_count() == 1:
+            raise
+        if not distributed.is_lost_process(e):
+            raise
+        raise distributed.ProcessLost(
+            distributed.lost_process_message(
+                e,
+                jax.process_index(),
+                jax.process_count(),
+                None,  # before the training loop
+                run_dir,
+                run_dirs.latest_checkpoint(run_dir),
+            )
+        ) from None
     finally:
+        if lock is not None:
+            lock.release()
         if linked and not run_dirs.has_checkpoint(run_dir):
             run_dirs.forget_run(latest_link, previous, run_dir if created else None)
 
@@ -375,13 +406,35 @@ def _check_finite(metrics: dict, it: int, last_saved, directory) -> None:
         )
 
 
+def _disk_full_logging(run_dir: str, checkpointer, it: int, state) -> str:
+    """One line for a full disk met while logging iteration `it` (metrics.csv was cut back to
+    its last whole row); the space needed is that of the next checkpoint."""
+    last = checkpointer.latest_step()
+    then = (
+        f"checkpoint {last} is the last complete one. Free space there, then continue from it "
+        f"(train.py --resume --run_dir {run_dir})"
+        if last is not None
+        else "no checkpoint is complete: free space there and start the run again"
+    )
+    need = checkpointer.checkpoint_bytes(state)
+    return files.disk_full_message(run_dir, f"logging iteration {it}", need, then)
+
+
 def _run(
     cfg, env, run_dir, resume, init_from, on_iteration, main, init_params=None
 ) -> train_lib.TrainState:
     """run() after the run-dir checks; see there."""
     t = cfg.train
     if main:
-        _write_config(cfg, run_dir)
+        try:
+            _write_config(cfg, run_dir)
+        except OSError as e:
+            if not files.is_disk_full(e):
+                raise
+            size = len(cfg.to_json_best_effort(indent=2)) + len(cfg.to_yaml())
+            raise files.DiskFull(
+                files.disk_full_message(run_dir, "writing config.json", size, "nothing changed")
+            ) from None
 
     warning = gpu_sized_warning(cfg, jax.default_backend())
     if warning:
@@ -441,7 +494,11 @@ def _run(
                 on_iteration(it, metrics, state)
             if it % int(t.checkpoint_every) == 0 or it == total:
                 last_saved = checkpointer.save(state)
+    except files.DiskFull:
+        raise
     except Exception as e:  # a collective's failure: JaxRuntimeError, or ValueError from jit
+        if files.is_disk_full(e):  # a metrics row (cut back whole); a save raises DiskFull
+            raise files.DiskFull(_disk_full_logging(run_dir, checkpointer, it, state)) from None
         if jax.process_count() == 1 or not distributed.is_lost_process(e):
             raise
         newest = run_dirs.latest_checkpoint(run_dir)

@@ -29,15 +29,33 @@ from foottof.envs import make_env, make_training_env  # noqa: E402
 from foottof.robot import pd_torque  # noqa: E402
 
 
-def _timeit(fn, state, steps):
-    t0 = time.perf_counter()
-    state = jax.block_until_ready(fn(state))
-    compile_s = time.perf_counter() - t0
+def time_steps(fn, state, steps):
+    """(last state, seconds per call) of ``steps`` chained calls ``state = fn(state)`` of a
+    compiled, warm ``fn``. Also bench/gpu_check.py's env-step timing."""
     t0 = time.perf_counter()
     for _ in range(steps):
         state = fn(state)
     jax.block_until_ready(state)
-    return compile_s, (time.perf_counter() - t0) / steps
+    return state, (time.perf_counter() - t0) / steps
+
+
+def time_iterations(iteration, state, iterations):
+    """(last state, seconds per iteration) of a compiled training iteration (``Train.iteration``):
+    one warm-up call, then ``iterations`` timed ones. Also bench/gpu_check.py's."""
+    state, metrics = iteration(state)
+    jax.block_until_ready(metrics)
+    t0 = time.perf_counter()
+    for _ in range(iterations):
+        state, metrics = iteration(state)
+    jax.block_until_ready((state, metrics))
+    return state, (time.perf_counter() - t0) / iterations
+
+
+def _timeit(fn, state, steps):
+    t0 = time.perf_counter()
+    state = jax.block_until_ready(fn(state))
+    compile_s = time.perf_counter() - t0
+    return compile_s, time_steps(fn, state, steps)[1]
 
 
 def _bare_c(env, qpos, steps):
@@ -99,13 +117,7 @@ def _train_iteration(cfg, physics_name, num_envs, iterations, one_epoch=False):
     t0 = time.perf_counter()
     iteration = trainer.iteration.lower(state).compile()
     compile_s = time.perf_counter() - t0
-    state, metrics = iteration(state)
-    jax.block_until_ready(metrics)
-    t0 = time.perf_counter()
-    for _ in range(iterations):
-        state, metrics = iteration(state)
-    jax.block_until_ready((state, metrics))
-    run_s = (time.perf_counter() - t0) / iterations
+    _, run_s = time_iterations(iteration, state, iterations)
     return compile_s, trainer.steps_per_iteration / run_s
 
 

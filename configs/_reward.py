@@ -51,31 +51,3 @@ def get_section() -> ml_collections.ConfigDict:
     r.scales = s
     return r
 
-
-def arrive(c) -> None:
-    """The anchors' goal-reaching task (Rudin et al. 2022, arXiv 2209.12827; Zhang et al. 2024,
-    arXiv 2311.10484), set on the full config ``c`` in place: a task reward paid only in the last
-    2 s (arriving early earns nothing more), a guidance bias that pays progress up to 0.6 m/s and
-    decays to zero over training iterations 500-1500, a stall penalty on progress (slow toward
-    the goal, not slow), a fall priced above the whole task reward, no clip of the dense sum and
-    a discount that sees the window from the stones. The pricing of each figure, with the
-    measured success and fall rates: docs/campaign.md ("Stones, third round: pricing")."""
-    r = c.reward
-    r.only_positive = False  # the dense sum is negative once the bias is gone: keep its penalties
-    r.task_window_s = 2.0  # Zhang et al.'s T_r (Rudin et al.: 1 s)
-    r.guidance_goal_pay = False  # nothing paid for standing at the goal early
-    r.guidance_max_speed_mps = 0.6  # the bias pays progress up to 0.6 m/s (the paper: 0.52 m/s)
-    r.guidance_decay_start_iteration = 500  # 10.2M env steps at 512 x 40
-    r.guidance_decay_end_iteration = 1500  # 30.7M env steps: the bias is gone
-    r.stall_toward_goal = True  # walking about on the start platform is stalling
-    r.stall_speed_mps = 0.2  # Zhang et al.'s "don't wait" threshold
-    s = r.scales
-    s.task = 10.0  # the window pays 10 / (1 + d^2) in all: 10 at the goal, 8 at 0.5 m
-    s.reach = 0.0  # the task term pays arriving
-    s.guidance = 2.0  # bias: at most 1.2 per s (0.6 m/s toward the goal)
-    s.termination = -15.0  # above the task's 10, below what makes a try worse than a refusal
-    s.stall = -2.0  # per s: refusing costs ~17 over an episode
-    # Returns of -15 to +10 give value losses ~100x the old task's (~0.5), and one gradient-norm
-    # clip spans actor and critic: scale the reward as a whole so the value loss stays ~0.5.
-    r.overall_scale = 0.1
-    c.ppo.gamma = 0.998  # the window 6.7-8.7 s after the stones is weighted 0.51-0.42 (0.99: 0.03)

@@ -13,11 +13,12 @@ without noise in 10 %). Terrain, sensors, noise, rewards and PPO are otherwise s
 recipe and what was measured for it: docs/campaign.md.
 """
 
-from configs import cpu
+from configs import base
 
 
 def get_config():
-    c = cpu.get_config()  # stage 1 + the CPU network
+    c = base.get_config()
+    c.stage = 1  # terrain mix and degradation uppers of stage 1
     c.terrain.num_levels = 10  # curriculum levels (stage1.py: 10)
     c.terrain.num_cols = 10  # columns split by stage1_weights below
     c.terrain.stage1_weights.grid_stones = 0.3  # 3 columns
@@ -28,6 +29,11 @@ def get_config():
     c.env.critic_height_scan = True  # privileged base-centred height scan for the critic
     c.ppo.num_envs = 512  # parallel envs (CPU; 1024 runs at the same env-steps/s)
     c.ppo.num_steps = 40  # rollout = truncated-backprop window: 0.8 s
+    c.ppo.num_minibatches = 4  # minibatches per epoch (128 envs each)
+    c.ppo.num_epochs = 4  # passes over each rollout
+    c.network.lstm_hidden_size = 64  # LSTM units (cpu.py's: policies/flat's shape)
+    c.network.actor_hidden = (128, 64)  # actor MLP head
+    c.network.critic_hidden = (128, 64)  # critic MLP head
     c.train.num_iterations = 10000  # 10000 x 512 x 40 = 205M env steps, run in --resume chunks
     c.train.checkpoint_every = 10  # checkpoint every N iterations
     c.network.max_noise_std = 0.4  # cap on the action std (stage1.py: no cap)

@@ -1,9 +1,9 @@
 """How much of the true foot-local terrain a belief student's memory holds: the R^2 of its
 decoder (network.reconstruct) against the teacher's foot patches, on the student's own rollouts.
 
-    python scripts/belief_r2.py runs/distill_C_belief [--envs 256] [--steps 150]   # ~3 min
+    python scripts/belief_r2.py policies/student [--envs 256] [--steps 150]   # ~3 min
 
-The student acts with its mean actions in its distillation env (configs/distill_belief_cpu.py,
+The student acts with its mean actions in its distillation env (configs/distill_cpu.py,
 the run's teacher), from fresh episodes at the curriculum's starting levels; the first 20 steps
 are left out. Prints the overall R^2 (1 - MSE / variance of the target, per input, averaged), the
 MSE over patch points more than 10 cm below the foot centre (gaps, lower surfaces) and the rest,
@@ -21,7 +21,7 @@ import jax  # noqa: E402
 import jax.numpy as jp  # noqa: E402
 import numpy as np  # noqa: E402
 
-from configs import distill_belief_cpu  # noqa: E402
+from configs import distill_cpu  # noqa: E402
 from foottof.constants import FEET  # noqa: E402
 from foottof.envs.observations import FOOT_PATCH_OFFSETS_M  # noqa: E402
 from foottof.ppo import checkpoint as ckpt  # noqa: E402
@@ -44,7 +44,7 @@ def main():
     a = ap.parse_args()
     if a.steps <= WARMUP:
         raise SystemExit(f"--steps={a.steps} must be > {WARMUP} (the warm-up left out)")
-    cfg = distill_belief_cpu.get_config()
+    cfg = distill_cpu.get_config()
     with cfg.unlocked():
         cfg.ppo.num_envs = a.envs
         cfg.network.reconstruct = 36

@@ -138,7 +138,7 @@ def test_integrity_record_lists_every_file(run4):
     assert integrity.integrity_problem(step_dir) is None
 
 
-@pytest.mark.parametrize("policy", ["flat", "stage1"])
+@pytest.mark.parametrize("policy", ["flat", "stage1", "teacher", "student"])
 def test_shipped_policies_carry_an_intact_record(policy):
     run = os.path.join(REPO, "policies", policy)
     steps = os.listdir(os.path.join(run, "checkpoints"))

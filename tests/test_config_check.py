@@ -1,5 +1,6 @@
 """foottof.config_check: shipped configs pass; each bad value fails with one line naming it."""
 
+import ast
 import glob
 import math
 import os
@@ -23,6 +24,43 @@ CONFIG_FILES = sorted(
 @pytest.mark.parametrize("path", CONFIG_FILES, ids=os.path.basename)
 def test_shipped_configs_pass(path):
     cc.check_config(load_config(path))
+
+
+def _config_imports(path):
+    """The config files ``path`` imports (``from configs import x`` / ``from configs.y import x``),
+    the base and the section files (configs/base.py, configs/_*.py) left out."""
+    tree = ast.parse(open(path).read())
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.ImportFrom) and (node.module or "").startswith("configs"):
+            folder = node.module.split(".")[1:]
+            out += [
+                os.path.join(REPO, "configs", *folder, a.name + ".py")
+                for a in node.names
+                if a.name != "base" and not a.name.startswith("_")
+            ]
+    return out
+
+
+def _chain_depth(path):
+    return 1 + max((_chain_depth(p) for p in _config_imports(path)), default=0)
+
+
+@pytest.mark.parametrize("path", CONFIG_FILES, ids=os.path.basename)
+def test_config_chains_are_at_most_three_deep(path):
+    """A config imports at most two others above configs/base.py (STYLE.md: a variant changes a
+    few fields of one user config; legged_gym: two levels), every one of them a file that exists."""
+    for imported in _config_imports(path):
+        assert os.path.exists(imported), (path, imported)
+    assert _chain_depth(path) <= 3, path
+
+
+def test_chain_depth_counts_imports_of_imports():
+    """The depth is what the files say: experiments/teacher_stones_cpu.py -> teacher_cpu.py ->
+    stage1_cpu.py (-> base, not counted) is 3; configs/cpu.py (-> base) is 1."""
+    stones = os.path.join(REPO, "configs", "experiments", "teacher_stones_cpu.py")
+    assert _chain_depth(stones) == 3
+    assert _chain_depth(os.path.join(REPO, "configs", "cpu.py")) == 1
 
 
 def _set(cfg, dotted, value):

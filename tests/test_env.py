@@ -6,7 +6,7 @@ import ml_collections
 import numpy as np
 import pytest
 
-from configs import _reward, smoke
+from configs import smoke, teacher_cpu
 from foottof import constants
 from foottof.envs import make_env
 from foottof.envs import rewards as rw
@@ -14,6 +14,15 @@ from foottof.envs.anymal_tof import FAIL_REASONS
 from foottof.terrain import TERRAIN_TYPES
 
 NUM_ENVS = len(TERRAIN_TYPES)  # one env per column: every terrain type is covered
+
+
+def _arrive(cfg):
+    """The goal-reaching task of configs/teacher_cpu.py (its reward and gamma) on ``cfg``, in
+    place, without the teacher's foot-edge price."""
+    teacher = teacher_cpu.get_config()
+    cfg.reward = teacher.reward
+    cfg.reward.scales.foot_edge = 0.0
+    cfg.ppo.gamma = teacher.ppo.gamma
 
 
 def _cfg():
@@ -375,9 +384,9 @@ def test_reward_terms_hand_checked():
 
 
 def test_arrive_task_terms_hand_checked():
-    """The anchors' task (configs/_reward.arrive): window, goal pay, bias weight, stall."""
+    """The anchors' task (configs/teacher_cpu.py): window, goal pay, bias weight, stall."""
     cfg = _cfg()
-    _reward.arrive(cfg)
+    _arrive(cfg)
     r = cfg.reward
 
     def terms(**kw):
@@ -457,7 +466,7 @@ def test_guidance_weight_counts_training_steps_across_resets(env):
     """The env's step counter (info['env_steps']) survives auto-resets and sets the bias weight:
     decay over iterations 0-2 at 2 steps per iteration, 3-step episodes."""
     cfg = _cfg()
-    _reward.arrive(cfg)
+    _arrive(cfg)
     cfg.reward.guidance_decay_start_iteration = 0
     cfg.reward.guidance_decay_end_iteration = 2
     cfg.ppo.num_steps = 2

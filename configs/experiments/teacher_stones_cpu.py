@@ -1,7 +1,7 @@
-"""The foot-edge teacher (configs/teacher_wide_edge_cpu.py) continued on the size-first stone
+"""The foot-edge teacher (configs/teacher_cpu.py) continued on the size-first stone
 curriculum (``terrain.stone_curriculum = "size_first"``, foottof.terrain.tiles.STONE_CURRICULA).
 
-Why: at the ensemble the teacher (policies/teacher_wide_edge, 5120, 104.9M env steps) wins 0 of
+Why: at the ensemble the teacher (policies/teacher, 5120, 104.9M env steps) wins 0 of
 73 stone episodes and 20 of 27 platform gaps; with the gaps cut to 0.1 m or flat tops it still
 wins none, with stones of 0.46-0.51 m it wins 19 of 79 (issue "Stones, fourth round"). On the
 gaps-first curriculum it trains its stone types at levels 5.7-6.6 (stones 0.6-0.9 m) and never
@@ -17,12 +17,12 @@ episode for feet at an edge, 0 for standing still. Issue "Stones, fourth round";
 docs/campaign.md.
 """
 
-from configs import teacher_wide_edge_cpu
+from configs import teacher_cpu
 
 
 def get_config():
-    c = teacher_wide_edge_cpu.get_config()
+    c = teacher_cpu.get_config()
     c.terrain.stone_curriculum = "size_first"  # stones shrink first (the default since 12-07)
-    c.train.init_from = "policies/teacher_wide_edge"  # 5120: params + normalizer
+    c.train.init_from = "policies/teacher"  # 5120: params + normalizer
     c.train.run_name = "teacher_stones_cpu"  # run directory name under train.run_root
     return c

@@ -24,11 +24,6 @@ def get_section() -> ml_collections.ConfigDict:
     c.entropy_coef = 0.005  # weight of the entropy bonus
     c.max_grad_norm = 1.0  # global gradient-norm clip
     c.normalize_advantage = True  # standardize advantages over the whole rollout batch
-    # A share of each device's envs (spread evenly over the env index) acts at low_noise_scale x
-    # the policy's std, so that rollouts visit what the mean action does; their log-probs are
-    # taken at that std and their surrogate weighted by the scale (0: every env at the std)
-    c.low_noise_share = 0.0
-    c.low_noise_scale = 0.25  # std multiplier of those envs, in (0, 1]
     return c
 
 

@@ -7,7 +7,6 @@ def get_section() -> ml_collections.ConfigDict:
     r = ml_collections.ConfigDict()
     r.success_radius_m = 0.5  # ending within this distance of the goal is a success [m]
     r.guidance_max_speed_mps = 1.0  # dense guidance saturates at this speed toward the goal [m/s]
-    r.guidance_peaked = False  # True: above guidance_max_speed_mps the guidance falls (2 vmax - v)
     r.guidance_goal_pay = True  # guidance pays its full rate within the success radius
     r.guidance_decay_start_iteration = 0  # guidance weight 1 until this training iteration ...
     r.guidance_decay_end_iteration = 0  # ... then linearly to 0 here (0: no decay) [iterations]
@@ -18,7 +17,6 @@ def get_section() -> ml_collections.ConfigDict:
     r.jump_grace_s = 0.2  # no jump penalty while the spawn drop lands [s]
     r.edge_radius_m = 0.04  # foot_edge: terrain sampled this far from the foot centre [m]
     r.edge_height_m = 0.05  # foot_edge: height spread of those samples that makes an edge [m]
-    r.clearance_target_m = 0.12  # foot_clearance: swing height asked of moving feet [m]
     r.overspeed_mps = 0.6  # overspeed: horizontal base speed above this is penalized [m/s]
     r.overall_scale = 1.0  # multiplies every scaled term: value targets' size, not the pricing
     r.only_positive = True  # clip the dense sum at 0 per step; reach/termination added after [-]
@@ -32,7 +30,6 @@ def get_section() -> ml_collections.ConfigDict:
     s.termination = (
         -1.0
     )  # sparse: 1 on a failure termination (fall, base contact, flip, divergence)
-    s.timeout = 0.0  # sparse: 1 at the time limit outside success_radius_m (0 = off)
     s.torques = -1e-5  # sum of squared joint torques [(N m)^2]
     s.joint_acc = -2.5e-7  # sum of squared joint accelerations [(rad/s^2)^2]
     s.action_rate = -0.01  # sum of squared action differences between control steps
@@ -45,9 +42,6 @@ def get_section() -> ml_collections.ConfigDict:
     )  # after reaching the goal: sum of squared deviations from the default pose [rad^2]
     s.collision = -1.0  # number of knee spheres touching the terrain (not a termination) [per s]
     s.foot_edge = 0.0  # number of feet touching the terrain at a height step (0 = off) [per s]
-    s.foot_clearance = 0.0  # moving feet below clearance_target_m: sum tanh(2|v|) shortfall^2
-    # (0 = off, and not computed) [m^2 per s]
     s.overspeed = 0.0  # horizontal base speed above overspeed_mps (0 = off) [(m/s) per s]
     r.scales = s
     return r
-

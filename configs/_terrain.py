@@ -70,8 +70,5 @@ def get_section() -> ml_collections.ConfigDict:
     c.init_level_max = 2  # initial level ~ U{0..init_level_max} [level]
     c.down_progress_frac = 0.5  # move down when covered < this fraction of the goal distance [-]
     c.up_progress_frac = 0.8  # move up when covered >= this fraction (or reached the goal) [-]
-    c.stretch_prob = 0.0  # share of episodes played on a stretch tile (level >= stretch_min_level);
-    # their outcome leaves the curriculum level as it was (0 = off) [-]
-    c.stretch_min_level = 7  # lowest stretch level (clipped to num_levels - 1) [level]
     c.no_promotion_on_fall = True  # an episode that ended in a failure is not promoted [-]
     return c

@@ -183,8 +183,6 @@ RULES = {
     "terrain.flat": _bool,
     "terrain.stone_curriculum": _choice("size_first", "gaps_first"),  # tiles.STONE_CURRICULA
     "terrain.no_promotion_on_fall": _bool,
-    "terrain.stretch_prob": _frac,
-    "terrain.stretch_min_level": _int(0),  # the env clips it to num_levels - 1
     # sensor, noise
     "sensor.sites": _non_empty_strs,
     "sensor.grid": _choice(*TOF_MAX_RATE_HZ),
@@ -254,7 +252,6 @@ RULES = {
     # reward
     "reward.success_radius_m": _pos,
     "reward.guidance_max_speed_mps": _pos,
-    "reward.guidance_peaked": _bool,
     "reward.stall_speed_mps": _nonneg,
     "reward.stall_grace_s": _nonneg,
     "reward.jump_grace_s": _nonneg,
@@ -288,8 +285,6 @@ RULES = {
     "ppo.entropy_coef": _nonneg,
     "ppo.max_grad_norm": _pos,
     "ppo.normalize_advantage": _bool,
-    "ppo.low_noise_share": _num(0.0, 1.0, hi_open=True),
-    "ppo.low_noise_scale": _num(0.0, 1.0, lo_open=True),
     "network.policy": _choice(*POLICIES),
     "network.lstm_hidden_size": _int(1),
     "network.lstm_num_layers": _int(1),

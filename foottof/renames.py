@@ -23,11 +23,6 @@ METRICS = {
 # behaviour: draw fingerprints leave them out at that default (legacy_config_dict), so evaluations
 # from before the field existed still pair with ones made after.
 ADDED_FIELDS = {
-    "reward.guidance_peaked": False,
-    "reward.scales.foot_clearance": 0.0,  # off: the term is not computed
-    "reward.clearance_target_m": 0.12,  # read only when foot_clearance is on
-    "terrain.stretch_prob": 0.0,  # off: every episode on its curriculum level's row
-    "terrain.stretch_min_level": 7,  # read only when stretch_prob is on
     "network.obs_skip": False,  # off: the heads read the LSTM output only
     "network.reconstruct": 0,  # no belief decoder
     "ppo.reconstruction_weight": 0.5,  # read only with network.reconstruct > 0
@@ -50,11 +45,30 @@ ADDED_FIELDS = {
     "env.physics_threads": 0,  # os.cpu_count() MuJoCo C threads
     "network.max_noise_std": 0.0,  # no cap on the action std
     "reward.scales.overspeed": 0.0,  # off: base speed is not penalized
-    "reward.scales.timeout": 0.0,  # off: the deadline away from the goal costs nothing
     "reward.overspeed_mps": 0.6,  # read only when the overspeed term is on
-    "ppo.low_noise_share": 0.0,  # every env acts at the policy's std
-    "ppo.low_noise_scale": 0.25,  # read only when low_noise_share > 0
     "terrain.stone_curriculum": "gaps_first",  # stones shrink last (tiles.STONE_CURRICULA)
+}
+# Config fields removed (2026-12-07, twenty-ninth session: experiment flags no shipped policy or
+# documented config used), with the default at which the behaviour was the code's of today. A
+# saved run config holding one at that default reads as if it never had it; at another value it
+# is refused (migrate_config_dict): this code cannot reproduce that run. The code that had them:
+# git commit REMOVED_AT.
+REMOVED_AT = "75dbea4"
+REMOVED_FIELDS = {
+    "reward.guidance_peaked": False,  # guidance fell above its speed (2 vmax - v)
+    "reward.scales.foot_clearance": 0.0,  # swing-height penalty (Isaac Lab's Spot)
+    "reward.clearance_target_m": 0.12,  # its swing height; read only with foot_clearance on
+    "reward.scales.timeout": 0.0,  # the deadline away from the goal priced like a fall
+    "terrain.stretch_prob": 0.0,  # share of episodes on a level above the curriculum's
+    "terrain.stretch_min_level": 7,  # their lowest level; read only with stretch_prob on
+    "ppo.low_noise_share": 0.0,  # share of envs acting at a lower action std
+    "ppo.low_noise_scale": 0.25,  # their std multiplier; read only with low_noise_share on
+}
+# Read only where the field they depend on is on: any value is dropped when that one is off.
+_REMOVED_DEPENDS = {
+    "reward.clearance_target_m": "reward.scales.foot_clearance",
+    "terrain.stretch_min_level": "terrain.stretch_prob",
+    "ppo.low_noise_scale": "ppo.low_noise_share",
 }
 # Added fields that were already in the configs of the evaluations kept (results/): draw
 # fingerprints hash them at every value, as those evaluations did; ADDED_FIELDS gives only the
@@ -84,7 +98,7 @@ def read_added(section, field: str):
     (ConfigDict or dict) that holds it, or its old-behaviour default where a config saved before
     the field existed lacks it: every such fallback goes through here.
 
-    Example: ``read_added(cfg.terrain, "terrain.stretch_prob")``."""
+    Example: ``read_added(cfg.terrain, "terrain.stone_curriculum")``."""
     return section.get(field.rsplit(".", 1)[-1], added_default(field))
 
 
@@ -94,10 +108,32 @@ RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}
 
 def migrate_config_dict(saved: dict) -> dict:
     """A saved run config (the nested dict of config.json) with renamed fields moved to their
-    new names (a copy; a field present under both names keeps the new one)."""
+    new names (a copy; a field present under both names keeps the new one) and removed fields
+    (REMOVED_FIELDS) dropped.
+
+    Raises:
+      ValueError: one line naming a removed field the run set away from its default (and the
+        commit whose code still has it).
+    """
     out = _copy(saved)
     for old, new in CONFIG_FIELDS.items():
         _move(out, old, new)
+    found = {}
+    for field in REMOVED_FIELDS:
+        *path, leaf = field.split(".")
+        parent = _walk(out, path)
+        if parent is not None and leaf in parent:
+            found[field] = parent.pop(leaf)
+    for field, value in found.items():
+        on = _REMOVED_DEPENDS.get(field)
+        if on is not None and found.get(on, REMOVED_FIELDS[on]) == REMOVED_FIELDS[on]:
+            continue  # read only when `on` is on, and it is off
+        if value != REMOVED_FIELDS[field]:
+            raise ValueError(
+                f"the run config sets {field}={value!r}, a field removed on 2026-12-07 (its "
+                f"default {REMOVED_FIELDS[field]!r} is today's behaviour): this code cannot "
+                f"resume or reproduce that run; the code at git commit {REMOVED_AT} can"
+            )
     return out
 
 

@@ -1,7 +1,6 @@
 """Tests of the LSTM PPO trainer: GAE, memory task, Brax env, checkpoints, resume, export."""
 
 import csv
-import dataclasses
 import os
 import re
 import warnings
@@ -104,77 +103,6 @@ def test_max_noise_std_caps_the_sampled_actions_and_the_logged_std():
     cfg.network.max_noise_std = -0.1
     with pytest.raises(ValueError, match=r"network.max_noise_std=-0.1: must be a number >= 0"):
         train_lib.make_train(env, cfg)
-
-
-def test_low_noise_envs_act_at_their_std_and_log_their_episodes():
-    """ppo.low_noise_share 0.25, scale 0.25, 64 envs: envs 3, 7, ..., 63 (hand: floor((i + 1) / 4)
-    > floor(i / 4)) act at std 0.25 x 1.0, the others at 1.0; each stored log-prob is the normal
-    log density at the env's std (closed form); the iteration logs those 16 envs' episodes (8
-    steps each, 16-step rollouts: 32) under low_noise/."""
-    env = toy_envs.make_memory_env()
-    cfg = small_cfg(low_noise_share=0.25, low_noise_scale=0.25)
-    cfg.network.init_noise_std = 1.0
-    trainer = train_lib.make_train(env, cfg)
-    settings = train_lib.Settings.from_config(cfg)
-    log_scale = train_lib.low_noise_log_scale(settings, 64)
-    low = np.arange(64) % 4 == 3
-    np.testing.assert_array_equal(log_scale, np.where(low, np.log(0.25), 0.0).astype(np.float32))
-    for n, share in ((64, 0.1), (100, 1 / 3), (7, 0.5), (512, 0.25)):
-        idx = np.flatnonzero(
-            train_lib.low_noise_envs(dataclasses.replace(settings, low_noise_share=share), n)
-        )
-        assert len(idx) == int(np.floor(n * share))
-        assert np.all(np.diff(idx) >= int(np.floor(1 / share)))  # spread, never adjacent runs
-    state = trainer.init(jax.random.PRNGKey(0))
-    _, traj, _ = train_lib.rollout(
-        env, trainer.networks, state, jax.random.PRNGKey(1), num_steps=64, log_scale=log_scale
-    )
-    dev = np.asarray(traj.actions - traj.means)[..., 0]  # (T, N)
-    np.testing.assert_allclose(dev[:, low].std(), 0.25, rtol=0.1)
-    np.testing.assert_allclose(dev[:, ~low].std(), 1.0, rtol=0.1)
-    std = np.where(low, 0.25, 1.0)[None]
-    want = -0.5 * (dev / std) ** 2 - np.log(std) - 0.5 * np.log(2 * np.pi)
-    np.testing.assert_allclose(np.asarray(traj.log_probs), want, rtol=1e-4, atol=1e-5)
-    _, metrics = trainer.iteration(state)
-    assert float(metrics["low_noise/episodes"]) == 32.0
-    assert float(metrics["train/episodes"]) == 128.0
-    assert 0.0 <= float(metrics["low_noise/episode/success"]) <= 1.0
-    plain = train_lib.make_train(env, small_cfg())
-    _, plain_metrics = plain.iteration(plain.init(jax.random.PRNGKey(0)))
-    assert not any(k.startswith("low_noise/") for k in plain_metrics)
-
-
-def test_ppo_loss_takes_each_envs_ratio_at_its_std_and_weights_it_by_the_scale():
-    """At the behaviour parameters every ratio is 1 when each env's log-prob is retaken at its
-    own std: no clipping, KL 0, and the policy loss is -mean(s_b A_tb) with s_b the env's std
-    multiplier (hand-computed from the batch). Taken at the policy's std instead, the low-noise
-    envs' ratios are not 1."""
-    env = toy_envs.make_memory_env()
-    cfg = small_cfg(low_noise_share=0.5, low_noise_scale=0.25)
-    trainer = train_lib.make_train(env, cfg)
-    networks = trainer.networks
-    state = trainer.init(jax.random.PRNGKey(0))
-    log_scale = train_lib.low_noise_log_scale(train_lib.Settings.from_config(cfg), 64)
-    _, traj, _ = train_lib.rollout(
-        env, networks, state, jax.random.PRNGKey(1), num_steps=16, log_scale=log_scale
-    )
-    adv = jax.random.normal(jax.random.PRNGKey(2), traj.rewards.shape)
-    batch = losses.Minibatch(
-        carry=state.carry, obs=traj.obs, resets=traj.resets, actions=traj.actions,
-        log_probs=traj.log_probs, means=traj.means,
-        log_std=networks.action_log_std(state.params), values=traj.values, advantages=adv,
-        returns=traj.values, log_scale=jp.asarray(log_scale),
-    )  # fmt: skip
-    kw = dict(clip_param=0.2, value_loss_coef=1.0, entropy_coef=0.0, use_clipped_value_loss=True)
-    _, m = losses.ppo_loss(state.params, networks, state.normalizer, batch, **kw)
-    assert float(m["ppo/clip_fraction"]) == 0.0 and abs(float(m["ppo/kl"])) < 1e-6
-    weight = np.exp(log_scale)[None]  # (1, N): 0.25 on the low-noise envs, 1 elsewhere
-    want = -np.mean(weight * np.asarray(adv))
-    np.testing.assert_allclose(float(m["loss/policy"]), want, rtol=1e-5)
-    _, m0 = losses.ppo_loss(
-        state.params, networks, state.normalizer, batch._replace(log_scale=0.0), **kw
-    )
-    assert float(m0["ppo/clip_fraction"]) > 0.2
 
 
 # --------------------------------------------------------------------- iteration parts alone
@@ -725,10 +653,6 @@ def test_bad_config_values():
         train_lib.make_train(env, small_cfg(lr_schedule="cosine"))
     with pytest.raises(ValueError, match="network.policy='gru'"):
         train_lib.make_train(env, small_cfg("gru"))
-    with pytest.raises(ValueError, match=r"ppo.low_noise_share=1.0: must be a number in \[0, 1\)"):
-        train_lib.make_train(env, small_cfg(low_noise_share=1.0))
-    with pytest.raises(ValueError, match=r"ppo.low_noise_scale=0.0: must be a number in \(0, 1\]"):
-        train_lib.make_train(env, small_cfg(low_noise_scale=0.0))
     locked = small_cfg()
     locked.lock()
     with pytest.raises(AttributeError, match="lerning_rate"):

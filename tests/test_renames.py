@@ -152,9 +152,9 @@ def test_draw_fingerprint_is_kept_across_the_rename():
     cfg.eval.deterministic, cfg.network.max_noise_std = False, 0.15  # sampled: the same draws
     assert results.episode_draws(cfg) == doc["draws"]
     cfg.eval.deterministic = True
-    cfg.terrain.stretch_prob = 0.2  # an added field counts away from its old-behaviour default
+    cfg.reward.scales.overspeed = -1.0  # an added field counts away from its old-behaviour default
     assert results.draws_fingerprint(cfg) != doc["draws"]["fingerprint"]
-    cfg.terrain.stretch_prob = 0.0
+    cfg.reward.scales.overspeed = 0.0
     cfg.reward.stall_speed_mps = 0.2  # a renamed field still counts
     assert results.draws_fingerprint(cfg) != doc["draws"]["fingerprint"]
     back = renames.legacy_config_dict(
@@ -209,27 +209,26 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
         del parent[leaf]
     old = ml_collections.ConfigDict(saved_before)
     new = ml_collections.ConfigDict(at_default)
-    at_default["terrain"]["stretch_min_level"] = 5  # away from the default: the specs differ
+    at_default["env"]["foot_stuck_depth_m"] = 0.1  # away from the default: the specs differ
     assert TaskSpec.from_config(old) == TaskSpec.from_config(new)
     assert TaskSpec.from_config(old) != TaskSpec.from_config(ml_collections.ConfigDict(at_default))
 
     from foottof import constants
 
-    pose = jp.asarray(constants.DEFAULT_POSE)  # swinging feet below the clearance target
+    pose = jp.asarray(constants.DEFAULT_POSE)
     x = rewards.RewardInputs(
         **dict(base_pos=jp.array([0.0, 0.0, 0.6]), base_lin_vel=jp.array([0.8, 0.0, 0.0])),
         **dict(goal_xy=jp.array([3.0, 0.0]), projected_gravity=jp.array([0.0, 0.0, -1.0])),
         **{k: jp.zeros(12) for k in ("torques", "qvel", "last_qvel", "action", "last_action")},
         **dict(foot_vel=jp.ones((4, 3)), foot_contact=jp.zeros(4), q=pose, default_q=pose),
         **dict(time_s=jp.asarray(5.0), failed=jp.asarray(0.0), truncated=jp.asarray(0.0)),
-        **dict(knee_contact=jp.zeros(4), foot_edge=jp.zeros(4), foot_clearance=jp.full(4, 0.02)),
+        **dict(knee_contact=jp.zeros(4), foot_edge=jp.zeros(4)),
         **dict(time_left_s=jp.asarray(1.0), guidance_weight=jp.asarray(1.0)),  # in the window
     )
 
     def terms(c):
         return rewards.compute_terms(x, rewards.RewardSpec.from_config(c.reward), 0.02)
 
-    assert float(terms(new)["foot_clearance"]) > 0.0
     for name, value in terms(old).items():
         assert jp.allclose(value, terms(new)[name]), name
 
@@ -242,8 +241,8 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
         assert jp.allclose(value, scaled(new)[name]), name
     new.reward.scales.task = 10.0  # away from the default: paid in the window
     assert float(scaled(new)["task"]) > 0.0 == float(scaled(old)["task"])
-    new.reward.clearance_target_m = 0.2  # away from the default: the term differs
-    assert not jp.allclose(terms(old)["foot_clearance"], terms(new)["foot_clearance"])
+    new.reward.task_window_s = 0.5  # away from the default: 1 s before the end is outside it
+    assert not jp.allclose(terms(old)["task"], terms(new)["task"])
     from foottof.ppo.networks import make_networks
 
     assert make_networks(12, old.network).module == make_networks(12, new.network).module
@@ -260,9 +259,61 @@ def test_read_added_is_the_one_fallback():
 
     assert renames.read_added({"physics": "mjx"}, "env.physics") == "mjx"
     assert renames.read_added({}, "env.physics") == "auto"
-    terrain = ml_collections.ConfigDict({"stretch_min_level": 4})
-    assert renames.read_added(terrain, "terrain.stretch_min_level") == 4
-    assert renames.read_added(terrain, "terrain.stretch_prob") == 0.0
+    terrain = ml_collections.ConfigDict({"no_promotion_on_fall": True})
+    assert renames.read_added(terrain, "terrain.no_promotion_on_fall") is True
+    assert renames.read_added(terrain, "terrain.stone_curriculum") == "gaps_first"
     with pytest.raises(KeyError, match="not an added field"):
         renames.read_added({}, "env.source")
     assert renames.HASHED_AT_DEFAULT <= set(renames.ADDED_FIELDS)
+
+
+def test_removed_fields_are_dropped_at_their_default_and_refused_elsewhere():
+    """renames.REMOVED_FIELDS (experiment flags removed on 2026-12-07): a saved run config holding
+    one at its default migrates without it; one that read it away from the default is refused in
+    one line naming the field and the commit whose code has it. A field read only when another is
+    on (ppo.low_noise_scale, with ppo.low_noise_share) is dropped whatever its value while that
+    one is off: policies/teacher's config.json holds low_noise_scale 0.25, share 0."""
+    saved = {
+        "ppo": {"low_noise_share": 0.0, "low_noise_scale": 0.5, "gamma": 0.998},
+        "reward": {"guidance_peaked": False, "scales": {"timeout": 0.0, "reach": 10.0}},
+        "terrain": {"stretch_prob": 0.0, "stretch_min_level": 7},
+    }
+    out = renames.migrate_config_dict(saved)
+    assert out == {"ppo": {"gamma": 0.998}, "reward": {"scales": {"reach": 10.0}}, "terrain": {}}
+    assert saved["ppo"]["low_noise_share"] == 0.0  # a copy: the saved dict is not changed
+    for field, value in (
+        ("ppo.low_noise_share", 0.25),
+        ("ppo.low_noise_scale", 0.5),  # read: low_noise_share is on
+        ("reward.scales.timeout", -15.0),
+        ("reward.scales.foot_clearance", -20.0),
+        ("terrain.stretch_prob", 0.1),
+        ("reward.guidance_peaked", True),
+    ):
+        bad = {"ppo": {"low_noise_share": 0.25}} if field == "ppo.low_noise_scale" else {}
+        section, *path, leaf = field.split(".")
+        node = bad.setdefault(section, {})
+        for p in path:
+            node = node.setdefault(p, {})
+        node[leaf] = value
+        with pytest.raises(ValueError) as info:
+            renames.migrate_config_dict(bad)
+        message = str(info.value)
+        assert "\n" not in message and renames.REMOVED_AT in message, message
+        assert (f"{field}={value!r}" in message) or field == "ppo.low_noise_scale", message
+
+
+def test_removed_fields_are_gone_from_the_configs_and_the_shipped_policies_migrate():
+    """No config file holds a removed field, none is an added one, and every shipped policy's
+    config.json (written while they existed) migrates."""
+    import glob
+
+    for path in glob.glob(str(Path(REPO) / "configs" / "**" / "[!_]*.py"), recursive=True):
+        flat = json.dumps(load_config(path).to_dict(), default=str)
+        for field in renames.REMOVED_FIELDS:
+            assert f'"{field.rsplit(".", 1)[1]}"' not in flat, (path, field)
+    assert not set(renames.REMOVED_FIELDS) & set(renames.ADDED_FIELDS)
+    policies = sorted(glob.glob(str(Path(REPO) / "policies" / "*" / "config.json")))
+    assert len(policies) >= 4
+    for path in policies:
+        with open(path) as f:
+            renames.migrate_config_dict(json.load(f))

@@ -33,7 +33,6 @@ from foottof.terrain import (
     tile_at,
     update_levels,
 )
-from foottof.terrain.curriculum import played_rows, stretch_levels
 from foottof.terrain.heightfield import write_to_mjx
 from foottof.terrain.terrain_map import tile_generator
 from foottof.terrain.tiles import (
@@ -911,40 +910,3 @@ def test_levels_table_level_zero_is_hazard_free():
             assert r["hazards_per_m"] > 0.5 and r["narrowest"] >= 2 * CELL, r
     md = levels_table.format_markdown(rows)
     assert md.count("\n") == len(rows) + 2
-
-
-def test_stretch_levels_draws_and_bounds():
-    level = jp.asarray(np.random.default_rng(0).integers(0, 10, 20000), jp.int32)
-    key = jax.random.key(3)
-    # off: every env plays its curriculum level
-    np.testing.assert_array_equal(np.asarray(stretch_levels(key, level, 0.0, 7, 10)), level)
-    # always: every env plays a level in {7, 8, 9}, each about a third of the time
-    out = np.asarray(stretch_levels(key, level, 1.0, 7, 10))
-    assert out.min() == 7 and out.max() == 9
-    np.testing.assert_allclose(np.bincount(out)[7:] / out.size, 1 / 3, atol=0.02)
-    # a share: where an env does not stretch it keeps its level; the stretched share ~ p
-    # (binomial, 20000 draws: 4 sigma = 0.013)
-    out = np.asarray(stretch_levels(key, level, 0.15, 7, 10))
-    moved = out != np.asarray(level)
-    assert np.all(out[moved] >= 7)
-    stretched = 0.15 * (1 - np.mean(np.asarray(level) >= 7) / 3)  # a draw may hit its own level
-    assert abs(moved.mean() - stretched) < 0.013
-    # the lowest stretch level is clipped to the top level of a smaller map
-    assert np.all(np.asarray(stretch_levels(key, level[:50] % 2, 1.0, 7, 2)) == 1)
-    with pytest.raises(ValueError, match="stretch_prob=1.5"):
-        stretch_levels(key, level, 1.5, 7, 10)
-    with pytest.raises(ValueError, match="min_level=-1"):
-        stretch_levels(key, level, 0.1, -1, 10)
-
-
-def test_played_rows_recover_the_spawn_row(small_map):
-    """Every row of every column, 50 spawns each drawn with the map's own spread."""
-    tm = small_map
-    num_levels, num_cols = tm.num_levels, tm.num_cols
-    level, col = np.meshgrid(np.arange(num_levels), np.arange(num_cols), indexing="ij")
-    level = np.repeat(level.ravel(), 50)
-    col = np.repeat(col.ravel(), 50)
-    keys = jax.random.split(jax.random.key(11), level.size)
-    spawn, _ = jax.vmap(sample_spawn_goal, in_axes=(0, None, 0, 0))(keys, tm, level, col)
-    nominal = jp.asarray(tm.spawn)[:, col, :2].transpose(1, 0, 2)  # (N, L, 2)
-    np.testing.assert_array_equal(np.asarray(played_rows(spawn[:, :2], nominal)), level)

@@ -69,7 +69,6 @@ class StepKinematics(NamedTuple):
     contact: jax.Array  # (4,) float 1 where a foot is within the contact margin
     gravity: jax.Array  # (3,) projected gravity (base frame)
     foot_edge: jax.Array  # (4,) feet touching the terrain at a height step
-    foot_clearance: jax.Array  # (4,) foot bottoms above the terrain under them (0 if unused) [m]
 
 
 class Ends(NamedTuple):
@@ -325,15 +324,9 @@ class AnymalToFEnv(Env):
         return d, action, jp.nan_to_num(taus), diverged
 
     def _step_kinematics(self, d) -> StepKinematics:
-        """Foot kinematics (analytic FK on the physics model), contacts, gravity, foot edges and
-        (when reward.scales.foot_clearance is on) foot clearances."""
+        """Foot kinematics (analytic FK on the physics model), contacts, gravity, foot edges."""
         fk, foot_vel = self._foot_kinematics(d)
-        clearance = jp.zeros(4)
         sr = self.spec.reward
-        if sr.scale("foot_clearance") != 0.0:  # static
-            clearance = rw.foot_clearances(
-                fk.foot_pos, self.hfield.height_at, self.foot_radius_m, sr.edge_radius_m
-            )
         return StepKinematics(
             fk=fk,
             foot_vel=foot_vel,
@@ -347,7 +340,6 @@ class AnymalToFEnv(Env):
                 sr.edge_radius_m,
                 sr.edge_height_m,
             ),
-            foot_clearance=clearance,
         )
 
     def _terminations(self, d, kin: StepKinematics, step, diverged) -> Ends:
@@ -402,7 +394,6 @@ class AnymalToFEnv(Env):
             truncated=ends.truncated.astype(jp.float32),
             knee_contact=ends.knee_contact,
             foot_edge=kin.foot_edge,
-            foot_clearance=kin.foot_clearance,
         )
         sr = self.spec.reward
         terms = rw.scaled_terms(
@@ -421,19 +412,7 @@ class AnymalToFEnv(Env):
         on the tile the curriculum picks (keeping the env's evaluation perturbation)."""
         cont = task.replace(rng=rng, step=step, last_action=action, last_qvel=d.qvel[6:18])
         new_level, new_col = self._curriculum(key_reset, task, d.qpos[0:2], success, ends.failed)
-        play_level = new_level
-        # static: some episodes on a stretch tile (terrain.stretch_*)
-        if self.spec.stretch_prob > 0:
-            play_level = curriculum.stretch_levels(
-                jax.random.fold_in(key_reset, 1),
-                new_level,
-                self.spec.stretch_prob,
-                self.spec.stretch_min_level,
-                self.tmap.num_levels,
-            )
-        fresh_d, fresh_task = self._reset_core(key_reset, play_level, new_col)
-        if self.spec.stretch_prob > 0:  # the env keeps its curriculum level, not the played row
-            fresh_task = fresh_task.replace(level=jp.asarray(new_level, jp.int32))
+        fresh_d, fresh_task = self._reset_core(key_reset, new_level, new_col)
         fresh_task = fresh_task.replace(params=_keep_perturbation(fresh_task.params, task.params))
         return select_where(ends.done, fresh_d, d), select_where(ends.done, fresh_task, cont)
 
@@ -515,10 +494,6 @@ class AnymalToFEnv(Env):
             up_progress_frac=self.spec.up_progress_frac,
             failed=failed if self.spec.no_promotion_on_fall else None,
         )
-        if self.spec.stretch_prob > 0:  # a stretch episode leaves the curriculum level as it was
-            nominal = jp.asarray(self.tmap.spawn)[:, task.col, :2]
-            stretched = curriculum.played_rows(task.spawn[:2], nominal) != task.level
-            level = jp.where(stretched, task.level, level)
         return level, task.col
 
     def _reset_episode(self, key, level, col, overrides: dict | None = None) -> State:

@@ -25,10 +25,9 @@ DENSE_TERMS = (
     "posture",
     "collision",
     "foot_edge",
-    "foot_clearance",
     "overspeed",
 )
-SPARSE_TERMS = ("reach", "termination", "timeout")
+SPARSE_TERMS = ("reach", "termination")
 REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
 
 
@@ -40,7 +39,6 @@ class RewardSpec:
 
     success_radius_m: float  # ending within this distance of the goal is a success [m]
     guidance_max_speed_mps: float
-    guidance_peaked: bool
     guidance_goal_pay: bool
     guidance_decay: tuple[int, int]  # (start, end) training iteration; end 0: no decay
     task_window_s: float
@@ -50,7 +48,6 @@ class RewardSpec:
     jump_grace_s: float
     edge_radius_m: float
     edge_height_m: float
-    clearance_target_m: float
     overspeed_mps: float  # the overspeed term counts base speed above this [m/s]
     overall_scale: float  # multiplies every scaled term
     only_positive: bool
@@ -69,7 +66,6 @@ class RewardSpec:
         return cls(
             success_radius_m=float(rcfg.success_radius_m),
             guidance_max_speed_mps=float(rcfg.guidance_max_speed_mps),
-            guidance_peaked=bool(read_added(rcfg, "reward.guidance_peaked")),
             guidance_goal_pay=bool(read_added(rcfg, "reward.guidance_goal_pay")),
             guidance_decay=(
                 int(read_added(rcfg, "reward.guidance_decay_start_iteration")),
@@ -82,7 +78,6 @@ class RewardSpec:
             jump_grace_s=float(rcfg.jump_grace_s),
             edge_radius_m=float(rcfg.edge_radius_m),
             edge_height_m=float(rcfg.edge_height_m),
-            clearance_target_m=float(read_added(rcfg, "reward.clearance_target_m")),
             overspeed_mps=float(read_added(rcfg, "reward.overspeed_mps")),
             overall_scale=float(read_added(rcfg, "reward.overall_scale")),
             only_positive=bool(rcfg.only_positive),
@@ -113,8 +108,6 @@ class RewardInputs:
       failed: 1.0 on a failure termination; truncated: 1.0 at the time limit.
       knee_contact: (4,) 1.0 where a knee sphere touches the terrain.
       foot_edge: (4,) 1.0 where a foot touches the terrain next to a height step (`foot_edges`).
-      foot_clearance: (4,) height of each foot's bottom above the highest terrain around it
-        (`foot_clearances`) [m]; zeros where the foot_clearance term is off.
       time_left_s: time until the episode's deadline after this step [s] (0 at the last step).
       guidance_weight: weight of the guidance bias this step, in [0, 1] (`guidance_weight`).
     """
@@ -137,7 +130,6 @@ class RewardInputs:
     truncated: jax.Array
     knee_contact: jax.Array
     foot_edge: jax.Array
-    foot_clearance: jax.Array
     time_left_s: jax.Array
     guidance_weight: jax.Array
 
@@ -197,25 +189,6 @@ def foot_edges(
     return (touching & (spread > edge_height_m)).astype(jp.float32)
 
 
-def foot_clearances(
-    foot_pos: jax.Array, height_at, foot_radius_m: float, edge_radius_m: float
-) -> jax.Array:
-    """(4,) height of each foot's bottom above the highest terrain under it [m].
-
-    The terrain is sampled where ``foot_edges`` samples it (under the foot centre and
-    ``edge_radius_m`` away along +-x, +-y), so a foot swinging past the rim of a stone is measured
-    from the rim, and one over the middle of a gap from the gap's floor (no clearance is owed there).
-
-    Args:
-      foot_pos: (4, 3) world foot-centre positions [m].
-      height_at: terrain height lookup, (..., 2) xy -> (...) z [m] (Heightfield.height_at).
-      foot_radius_m: foot sphere radius [m].
-      edge_radius_m: horizontal distance of the four side samples from the foot centre [m].
-    """
-    top = jp.max(_probe_heights(foot_pos, height_at, edge_radius_m), axis=-1)  # (4,)
-    return foot_pos[:, 2] - foot_radius_m - top
-
-
 def goal_distance(x: RewardInputs) -> jax.Array:
     """Horizontal distance from the base to the goal [m]."""
     return jp.linalg.norm(x.goal_xy - x.base_pos[:2])
@@ -236,8 +209,6 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
     vmax = spec.guidance_max_speed_mps
     # Dense guidance: speed toward the goal (clipped); full credit once within the success radius.
     paid = jp.clip(v_toward, -vmax, vmax)
-    if spec.guidance_peaked:  # static: above vmax the pay falls as it rose
-        paid = jp.where(v_toward > vmax, jp.maximum(2.0 * vmax - v_toward, -vmax), paid)
     # static: full credit within the success radius (the old task), or nothing paid there
     guidance = (
         jp.where(at_goal > 0, vmax if spec.guidance_goal_pay else 0.0, paid) * x.guidance_weight
@@ -253,11 +224,8 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
     speed = v_toward if spec.stall_toward_goal else horizontal_speed  # static
     stalling = (speed < spec.stall_speed_mps) & (at_goal == 0) & (x.time_s > spec.stall_grace_s)
     foot_speed_sq = jp.sum(jp.square(x.foot_vel[:, :2]), axis=-1)
-    target = spec.clearance_target_m
     return {
         "reach": x.truncated * at_goal,
-        # the deadline away from the goal: priced like a fall, stopping on the way stops paying
-        "timeout": x.truncated * (1.0 - at_goal),
         "termination": x.failed,
         "task": task,
         "guidance": guidance,
@@ -272,13 +240,6 @@ def compute_terms(x: RewardInputs, spec: RewardSpec, control_dt_s: float) -> dic
         "posture": at_goal * jp.sum(jp.square(x.q - x.default_q)),
         "collision": jp.sum(x.knee_contact),
         "foot_edge": jp.sum(x.foot_edge),
-        # Isaac Lab's foot_clearance_reward (Spot), as a penalty on the shortfall only and from
-        # the terrain under the foot: sum over feet of tanh(2 |v_xy|) max(0, target - clearance)^2,
-        # so moving (swinging) feet are asked to lift to the target and standing feet not.
-        "foot_clearance": jp.sum(
-            jp.tanh(2.0 * jp.sqrt(foot_speed_sq))
-            * jp.square(jp.maximum(target - x.foot_clearance, 0.0))
-        ),
         # The paper's "overly aggressive gaits" regularizer: horizontal base speed above
         # overspeed_mps, linear in the excess (arriving early earns nothing on the arrive task).
         "overspeed": jp.maximum(horizontal_speed - spec.overspeed_mps, 0.0),
@@ -315,7 +276,7 @@ def total_reward(terms: dict[str, jax.Array], only_positive: bool, valid: jax.Ar
     ``only_positive`` is legged_gym's ``only_positive_rewards`` ("avoids early termination
     problems"): the dense terms can make a step worth nothing but never negative, so a policy
     learning to walk is not paid less than one standing still for each stumble; the sparse
-    ``reach``, ``termination`` and ``timeout`` are added after the clip (as legged_gym adds
+    ``reach`` and ``termination`` are added after the clip (as legged_gym adds
     termination).
 
     Args:

@@ -31,8 +31,6 @@ class TaskSpec:
     down_progress_frac: float
     up_progress_frac: float
     no_promotion_on_fall: bool
-    stretch_prob: float
-    stretch_min_level: int
     init_level_max: int
     init_joint_noise_rad: float
     init_roll_pitch_rad: float
@@ -65,8 +63,6 @@ class TaskSpec:
             down_progress_frac=float(t.down_progress_frac),
             up_progress_frac=float(t.up_progress_frac),
             no_promotion_on_fall=bool(read_added(t, "terrain.no_promotion_on_fall")),
-            stretch_prob=float(read_added(t, "terrain.stretch_prob")),
-            stretch_min_level=int(read_added(t, "terrain.stretch_min_level")),
             init_level_max=int(t.init_level_max),
             init_joint_noise_rad=float(e.init_joint_noise_rad),
             init_roll_pitch_rad=float(e.init_roll_pitch_rad),

@@ -31,7 +31,6 @@ def eval_config(cfg: ml_collections.ConfigDict, perturbation: str, level: float)
         c.env.randomization.joint_offset_rad = 0.0  # nominal readings; levels come at reset
         c.env.randomization.odometry_level = 1.0  # the paper's nominal 100 %
         c.terrain.init_level_max = int(c.eval.num_levels) - 1  # spawn on every row
-        c.terrain.stretch_prob = 0.0  # every episode on its own row (no stretch tiles)
         c.env.model.shank_scale = float(level) if perturbation == "shank_length" else 1.0
     return c, float(c.env.model.shank_scale)
 

@@ -21,9 +21,6 @@ class Minibatch(NamedTuple):
     values: jax.Array  # (T, B) V_old(s_t)
     advantages: jax.Array  # (T, B) (normalized) GAE advantages
     returns: jax.Array  # (T, B) value targets = GAE advantages + values
-    # (B,) log of each env's std multiplier (ppo.low_noise_share; train.low_noise_log_scale), or
-    # a scalar for all: the behaviour std of env b is exp(log_std + log_scale[b])
-    log_scale: Any = 0.0
 
 
 def bootstrap_truncation(
@@ -89,11 +86,6 @@ def ppo_loss(
 ) -> tuple[jax.Array, dict[str, jax.Array]]:
     """Clipped surrogate + (clipped) value loss - entropy bonus, averaged over (T, B).
 
-    An env acting at a lower std (batch.log_scale < 0) has its ratio taken at that std and its
-    surrogate weighted by the std multiplier s: its score on the mean, (a - mean) / (s std)^2,
-    is 1 / s times a full-noise env's, and the weight brings it back to that size. The entropy
-    and the KL (the adaptive rate's) are the policy's own, at its std.
-
     Returns:
       (loss, metrics) with 'loss/policy', 'loss/value', 'loss/entropy' (the entropy, not its
       weighted term), 'ppo/kl' (rsl_rl KL(old || new) mean) and 'ppo/clip_fraction'.
@@ -101,14 +93,11 @@ def ppo_loss(
     means, log_std, values = networks.unroll(
         params, normalizer, batch.carry, batch.obs, batch.resets
     )
-    log_scale = jp.asarray(batch.log_scale, jp.float32)
-    log_scale = log_scale[:, None] if log_scale.ndim == 1 else log_scale  # (B, 1) or ()
-    log_probs = net.gaussian_log_prob(batch.actions, means, log_std + log_scale)
+    log_probs = net.gaussian_log_prob(batch.actions, means, log_std)
     ratio = jp.exp(log_probs - batch.log_probs)
     surrogate = -batch.advantages * ratio
     surrogate_clipped = -batch.advantages * jp.clip(ratio, 1.0 - clip_param, 1.0 + clip_param)
-    weight = jp.exp(log_scale[..., 0]) if log_scale.ndim else 1.0  # (B,): the std multiplier
-    policy_loss = jp.mean(weight * jp.maximum(surrogate, surrogate_clipped))
+    policy_loss = jp.mean(jp.maximum(surrogate, surrogate_clipped))
 
     if use_clipped_value_loss:
         values_clipped = batch.values + jp.clip(values - batch.values, -clip_param, clip_param)

@@ -160,8 +160,6 @@ class Settings:
     use_clipped_value_loss: bool
     distilling: bool  # train.teacher set: the imitation loss (foottof.ppo.distill) replaces PPO's
     reconstruction_weight: float = 0.0  # distillation with a belief decoder (network.reconstruct)
-    low_noise_share: float = 0.0  # share of each device's envs acting at a lower std
-    low_noise_scale: float = 1.0  # their std multiplier (low_noise_log_scale)
 
     @classmethod
     def from_config(cls, cfg: ml_collections.ConfigDict) -> "Settings":
@@ -184,8 +182,6 @@ class Settings:
             use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
             distilling=bool(train_cfg is not None and read_added(train_cfg, "train.teacher")),
             reconstruction_weight=float(read_added(ppo, "ppo.reconstruction_weight")),
-            low_noise_share=float(read_added(ppo, "ppo.low_noise_share")),
-            low_noise_scale=float(read_added(ppo, "ppo.low_noise_scale")),
         )
 
     def loss_kwargs(self) -> dict:
@@ -196,27 +192,6 @@ class Settings:
             entropy_coef=self.entropy_coef,
             use_clipped_value_loss=self.use_clipped_value_loss,
         )
-
-
-def low_noise_envs(settings: Settings, n_local: int) -> np.ndarray:
-    """(n_local,) bool: the local envs that act at ``low_noise_scale`` x the policy's std, those
-    i where floor((i + 1) share) > floor(i share): floor(n_local x share) of them, spread evenly
-    over the index (so over the terrain types too), the same in every iteration."""
-    share = settings.low_noise_share
-    i = np.arange(n_local)
-    return np.floor((i + 1) * share) > np.floor(i * share)
-
-
-def low_noise_log_scale(settings: Settings, n_local: int) -> np.ndarray:
-    """(n_local,) log of each local env's action-std multiplier: log(low_noise_scale) on the
-    low_noise_envs, 0 (the policy's std) on the rest.
-
-    Why: a policy whose sampled actions walk on may stand still under its mean action (the mean
-    action is what a robot and evaluate.py run); the stall is invisible to PPO when no rollout
-    acts near the mean. Those envs' actions, log-probs and ratios use the lower std, so PPO
-    learns from them as from any behaviour policy that shares the mean."""
-    low = low_noise_envs(settings, n_local)
-    return np.where(low, math.log(settings.low_noise_scale), 0.0).astype(np.float32)
 
 
 # The functions of one iteration, each callable alone. Those that take a mesh axis (`local_*`,
@@ -267,7 +242,7 @@ def rollout_step(env, networks: net.Networks, params, normalizer, log_std, carry
     """One env step of the rollout: act ~ N(mean, std), step the envs, book the episode.
 
     Args:
-      log_std: (A,) log std of the actions, or (N, A) one per env (low_noise_log_scale).
+      log_std: (A,) log std of the actions.
       carry: (env_state, LSTM carry, prev_done (N,), ep_return (N,), ep_length (N,)).
       key_step: (2,) PRNG key of this step's action noise.
 
@@ -297,12 +272,8 @@ def rollout_step(env, networks: net.Networks, params, normalizer, log_std, carry
     return (env_state, net_carry, done, ep_return, ep_length), tr
 
 
-def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int, log_scale=None):
+def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int):
     """``num_steps`` steps of the envs in `state` under its policy (no collectives).
-
-    Args:
-      log_scale: (N,) log std multiplier per env (low_noise_log_scale); None: all envs at the
-        policy's std.
 
     Returns:
       (the carry after the last step (as rollout_step's), Transition with leaves (T, N, ...),
@@ -310,8 +281,6 @@ def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int,
     """
     params, normalizer = state.params, state.normalizer
     log_std = networks.action_log_std(params)
-    if log_scale is not None:
-        log_std = log_std + jp.asarray(log_scale)[:, None]  # (N, A)
     step = functools.partial(rollout_step, env, networks, params, normalizer, log_std)
     carry0 = (state.env_state, state.carry, state.prev_done, state.ep_return, state.ep_length)
     carry, traj = jax.lax.scan(step, carry0, jax.random.split(key, num_steps))
@@ -369,7 +338,6 @@ def epoch_minibatches(data: losses.Minibatch, key, num_minibatches: int) -> loss
       log_std (M, A)); every env in exactly one minibatch.
     """
     n_local = data.advantages.shape[1]
-    log_scale = jp.asarray(data.log_scale, jp.float32)  # () for all envs, or (N,) per env
     perm = jax.random.permutation(key, n_local)  # shuffle envs, keep time order
     idx = perm.reshape(num_minibatches, n_local // num_minibatches)
 
@@ -380,7 +348,7 @@ def epoch_minibatches(data: losses.Minibatch, key, num_minibatches: int) -> loss
             resets=data.resets[:, i], actions=data.actions[:, i],
             log_probs=data.log_probs[:, i], means=data.means[:, i], log_std=data.log_std,
             values=data.values[:, i], advantages=data.advantages[:, i],
-            returns=data.returns[:, i], log_scale=log_scale[i] if log_scale.ndim else log_scale,
+            returns=data.returns[:, i],
         )  # fmt: skip
 
     minibatches = jax.vmap(take)(idx)  # leading minibatch axis
@@ -422,11 +390,6 @@ def local_update(
         carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
         log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(params),
         values=traj.values, advantages=advantages, returns=returns,
-        log_scale=(  # static: a scalar 0 (every env at the std) unless a share is set
-            jp.asarray(low_noise_log_scale(settings, traj.rewards.shape[1]))
-            if settings.low_noise_share > 0
-            else 0.0
-        ),
     )  # fmt: skip
     sgd = functools.partial(sgd_step, networks, optimizer, settings)
     (new_params, opt_state, _), sgd_metrics = jax.lax.scan(
@@ -451,11 +414,8 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
     # Each device gets its own rollout stream; the state key stays replicated.
     key_rollout = jax.random.fold_in(key_rollout, jax.lax.axis_index(AXIS))
     carry_start = state.carry  # stored initial carry of this rollout (before any reset)
-    low = settings.low_noise_share > 0  # static
-    n_local = state.prev_done.shape[0]
-    log_scale = low_noise_log_scale(settings, n_local) if low else None  # (N,)
     (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = rollout(
-        env, networks, state, key_rollout, settings.num_steps, log_scale
+        env, networks, state, key_rollout, settings.num_steps
     )
     params, opt_state, normalizer, sgd_metrics = local_update(
         networks,
@@ -468,8 +428,7 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
         key_update,
     )
     log_std = networks.action_log_std(params)
-    low_envs = low_noise_envs(settings, n_local) if low else None
-    metrics = _iteration_metrics(traj, sgd_metrics, log_std, params, opt_state, low_envs)
+    metrics = _iteration_metrics(traj, sgd_metrics, log_std, params, opt_state)
     new_state = TrainState(
         params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
         carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
@@ -574,9 +533,7 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     )
 
 
-def _iteration_metrics(
-    traj: Transition, sgd_metrics: dict, log_std, params, opt_state, low=None
-) -> dict:
+def _iteration_metrics(traj: Transition, sgd_metrics: dict, log_std, params, opt_state) -> dict:
     """Scalar metrics of one iteration, reduced over all devices.
 
     'train/episode_return', 'train/episode_length': means over episodes finished in the rollout
@@ -584,9 +541,7 @@ def _iteration_metrics(
     env metrics under their own names ('episode/*' averaged over done steps, others over all
     steps); 'loss/*', 'ppo/kl', 'ppo/clip_fraction', 'ppo/grad_norm' averaged over minibatches;
     'ppo/learning_rate' after the update, 'ppo/learning_rate_mean' the mean rate the
-    minibatch updates used; 'ppo/action_std' mean std; 'ppo/params_finite' 1 or 0. With
-    ``low`` ((N,) bool, the low-noise envs; ppo.low_noise_share > 0) also 'low_noise/episodes'
-    and every 'episode/*' metric over those envs' episodes as 'low_noise/episode/*'.
+    minibatch updates used; 'ppo/action_std' mean std; 'ppo/params_finite' 1 or 0.
     """
     psum = lambda x: jax.lax.psum(x, AXIS)
     n_done = psum(jp.sum(traj.dones))
@@ -603,15 +558,6 @@ def _iteration_metrics(
             m[k] = per_episode(v * traj.dones)
         else:
             m[k] = psum(jp.sum(v)) / n_steps
-    if low is not None:  # static
-        low_done = traj.dones * jp.asarray(low, jp.float32)[None]
-        n_low = psum(jp.sum(low_done))
-        m["low_noise/episodes"] = n_low
-        for k, v in traj.metrics.items():
-            if k.startswith(EPISODE_PREFIX):
-                m["low_noise/" + k] = jp.where(
-                    n_low > 0, psum(jp.sum(v * low_done)) / jp.maximum(n_low, 1.0), jp.nan
-                )
     m.update(jax.tree.map(jp.mean, sgd_metrics))
     m["ppo/learning_rate"] = opt_state.hyperparams["learning_rate"]
     m["ppo/action_std"] = jp.mean(jp.exp(log_std))
@@ -641,8 +587,6 @@ __all__ = [
     "epoch_minibatches",
     "init_state",
     "local_iteration",
-    "low_noise_envs",
-    "low_noise_log_scale",
     "local_update",
     "make_train",
     "rollout",

@@ -254,3 +254,34 @@ def test_no_gl_is_a_clear_error(monkeypatch):
     monkeypatch.setattr(video, "available_backends", lambda: [])
     with pytest.raises(RuntimeError, match=r"no headless OpenGL .*make render-deps"):
         video._gl_context(64, 64)
+
+
+@pytest.mark.slow
+def test_the_demo_episode_crosses_stones_to_the_goal():
+    """`make demo`'s stone episode, as its evaluate.py command builds it (the Makefile's
+    DEMO_SEED, checkpoint, config and difficulty; the run's network and stone curriculum): the
+    policy ends at the goal without a fall, on a stepping-stone tile (the tile of the nearest
+    nominal spawn). ~5 min on 2 CPU cores."""
+    import re
+
+    from configs import load_config
+    from foottof.ppo import run_dir
+    from foottof.terrain import TERRAIN_TYPES
+
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+    make = open(os.path.join(repo, "Makefile")).read()
+    seed = int(re.search(r"^DEMO_SEED := (\d+)$", make, re.M).group(1))
+    line = next(x for x in make.splitlines() if "--out $(DEMO_OUT)/stones" in x)
+    ckpt = os.path.join(repo, re.search(r"--checkpoint (\S+)", line).group(1))
+    cfg = load_config(os.path.join(repo, re.search(r"--config (\S+)", line).group(1)))
+    cfg.eval.difficulty_fraction = float(re.search(r"difficulty_fraction=(\S+)", line).group(1))
+    assert "--config.eval.seed=$(DEMO_SEED)" in line
+    cfg.eval.seed = seed
+    cfg = run_dir.with_run_network(cfg, ckpt)
+    cfg, _ = run_dir.with_run_curriculum(cfg, run_dir.run_config_path(ckpt))
+    env, trace = analysis.record_episode(cfg, "tof", ckpt, jax.random.PRNGKey(seed))
+    assert trace["success"] and not trace["failed"]
+    spawn = np.asarray(env.tmap.spawn)[..., :2]  # (rows, cols, 2)
+    d2 = np.sum((spawn - trace["qpos"][0][:2]) ** 2, axis=-1)
+    col = np.unravel_index(np.argmin(d2), d2.shape)[1]
+    assert TERRAIN_TYPES[int(np.asarray(env.tmap.col_type)[col])].endswith("_stones")

@@ -176,6 +176,8 @@ def main(argv):
             if _EPISODES.value < 1:
                 raise ValueError(f"--episodes {_EPISODES.value}: must be >= 1")
             cfg.eval.episodes = _EPISODES.value
+        if not (_ANALYZE.value or _EXPORT.value):
+            print(rb.plan_line(plan, int(cfg.eval.episodes), int(cfg.eval.num_envs)), flush=True)
         if _ANALYZE.value:  # flags checked before any policy is looked for or env built
             _check_analyze(sources, plan)
         if _EXPORT.value:

@@ -858,3 +858,47 @@ def test_cli_analyze_and_export_end_to_end(tmp_path):  # two env compiles in sub
 
     policy = NumpyPolicy(str(out))
     assert policy(np.zeros(policy.obs_size, np.float32)).shape == (12,)
+
+
+# ---------------------------------------------------------------------------------------------
+# The plan line and progress within a batch
+def test_plan_line_names_cells_episodes_estimate_and_quick_form():
+    """The design card's evaluation (mock_aggre, the odometry sweep, 5 x 1000): 5000 episodes in
+    batches of 250, 5 x 8.5 min + one compile of 1 min = 43.5 -> ~44 min; its quick form names
+    --episodes and --levels (one cell of the same sweep)."""
+    cfg = smoke.get_config()
+    line = rb.plan_line(rb.sweep_plan(cfg.eval, ("mock_aggre",), None), 1000, 250)
+    assert line.startswith("[evaluate] 5 cell(s) x 1000 episodes = 5000 (mock_aggre odometry ")
+    assert "batches of 250" in line and "~44 min" in line and "1 compile(s)" in line
+    assert line.endswith("Quick look: --episodes 100 --perturbation odometry --levels 0")
+    # every sweep of every source: 45 cells; shank_length compiles once per level (3 x 5), the
+    # traced sweeps once each (3 x 2); the quick form is one unperturbed cell per source
+    plan = rb.sweep_plan(cfg.eval, ("tof", "mock_ideal", "mock_aggre"), "all")
+    line = rb.plan_line(plan, 200, 250)
+    assert "45 cell(s) x 200 episodes = 9000" in line and "21 compile(s)" in line
+    assert "batches of 200" in line and line.endswith("--episodes 100 --perturbation none")
+
+
+class _Bar:
+    def __init__(self):
+        self.updates = []
+
+    def update(self, n):
+        self.updates.append(n)
+
+
+def test_progress_moves_within_a_batch_and_leaves_the_outcomes_alone():
+    """With a progress bar the sweep advances it as the steps of each batch run (8 episodes in 2
+    batches of 4 envs x 25 steps: an episode per 25 / 4 steps, not one move per batch), and its
+    per-episode outcomes equal those of the same sweep without one (the rollout's callback
+    reads nothing back)."""
+    cfg = tiny_cfg()
+    cfg.eval.episodes = 8
+    key = jax.random.PRNGKey(0)
+    bar = _Bar()
+    rows, outcomes = rb.evaluate_sweep(cfg, "tof", "none", (0.0,), None, key, bar, True)
+    assert sum(bar.updates) == 8 and len(bar.updates) > 2  # 2 batches, more moves
+    rows0, outcomes0 = rb.evaluate_sweep(cfg, "tof", "none", (0.0,), None, key, None, True)
+    assert rows == rows0
+    for k in outcomes0[0]:
+        np.testing.assert_array_equal(outcomes[0][k], outcomes0[0][k])

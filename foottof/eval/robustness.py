@@ -36,6 +36,10 @@ PERTURBATIONS = ("none", "joint_offset", "shank_length", "odometry")
 HEADLINE_SWEEPS = {"tof": "joint_offset", "mock_ideal": "joint_offset", "mock_aggre": "odometry"}
 TRACED_PERTURBATIONS = ("joint_offset", "odometry")  # levels are rollout arguments (one compile)
 LEVEL_UNITS = {"none": "-", "joint_offset": "rad", "shank_length": "scale", "odometry": "x100%"}
+# Minutes per 1000 episodes on 2 CPU cores, compile aside: bench/NOTES.md ("Foot-reading sources",
+# item 10: tof 2.0, mock_ideal 3.8) and issue 70 (mock_aggre: 5 x 1000 episodes in ~42 min).
+CPU_MIN_PER_1000 = {"tof": 2.0, "mock_ideal": 3.8, "mock_aggre": 8.5}
+COMPILE_MIN = 1.0  # about one minute per compiled rollout (bench: tof 47 s) on 2 CPU cores
 
 
 # ---------------------------------------------------------------------------------------------
@@ -127,9 +131,14 @@ def make_rollout(
     steps: int,
     perturbation: str = "none",
     deterministic: bool = True,
+    on_step=None,
 ):
     """jit-ed (params, normalizer, key, level) -> (per-step (T, B) arrays done/success/failed/
     speed, (B,) terrain column of each env's first episode).
+
+    ``on_step``: called on the host with the index t of each step done (0 .. steps - 1) while
+    the rollout runs (``jax.debug.callback``; it reads nothing back), e.g. to advance a progress
+    bar within a batch; the rollout's outputs are those without it.
 
     ``deterministic``: act with the policy mean (the default), or sample actions at the policy's
     action std as in training (``eval.deterministic=False``: what the curriculum sees).
@@ -152,10 +161,13 @@ def make_rollout(
         carry = networks.init_carry(num_envs)
         first = jp.ones((num_envs,), bool)
 
-        def body(c, k):
+        def body(c, xs):
             state, carry, reset_flags = c
+            k, t = xs if on_step is not None else (xs, None)  # static
             carry, action = act(carry, state.obs, reset_flags, k)
             state = step(state, action)
+            if on_step is not None:
+                jax.debug.callback(on_step, t)
             out = (
                 state.done,
                 state.metrics["episode/success"],
@@ -165,7 +177,9 @@ def make_rollout(
             return (state, carry, state.done > 0.5), out
 
         col = state.info["task"].col  # the tile column of the first episode (its terrain type)
-        _, outs = jax.lax.scan(body, (state, carry, first), jax.random.split(key_run, steps))
+        xs = jax.random.split(key_run, steps)
+        xs = xs if on_step is None else (xs, jp.arange(steps))  # without it: the old program
+        _, outs = jax.lax.scan(body, (state, carry, first), xs)
         return outs, col
 
     return jax.jit(rollout)
@@ -194,7 +208,7 @@ def evaluate_sweep(
       perturbation, levels: validated by check_levels.
       checkpoint: checkpoint path, or None for a freshly initialized (untrained) policy.
       key: PRNG key (terrain map, policy init, episodes).
-      progress: optional tqdm bar, advanced by the episodes of each batch.
+      progress: optional tqdm bar, advanced by the episodes of each batch as its steps run.
       return_outcomes: also return each level's per-episode outcomes: the (n,) arrays of
         first_episode_outcomes and ``terrain`` (the terrain type name of the episode's tile).
         Episode i is the same draw at every level, and in every evaluation with the same
@@ -233,6 +247,7 @@ def evaluate_sweep(
             cfg, source, checkpoint, key_map, key_init, perturbation, group[0]
         )
         col_type = np.asarray(jax.device_get(env.tmap.col_type))  # (C,) type index per column
+        ticks = None if progress is None else _StepTicks(progress, env.episode_steps)
         rollout = make_rollout(
             env,
             networks,
@@ -240,19 +255,23 @@ def evaluate_sweep(
             env.episode_steps,
             perturbation,
             deterministic=bool(cfg.eval.deterministic),
+            on_step=None if ticks is None else ticks.step,
         )
         for level in todo:
             parts, collected, k_run = [], 0, key_run
             while collected < episodes:
                 k_run, k = jax.random.split(k_run)
+                take = min(num_envs, episodes - collected)
+                if ticks is not None:
+                    ticks.start(take)
                 outs, col = jax.device_get(rollout(params, normalizer, k, jp.float32(level)))
+                if ticks is not None:
+                    jax.effects_barrier()  # every step's callback has run
+                    ticks.finish()
                 res = first_episode_outcomes(*outs)
                 res["terrain"] = type_names[col_type[col]]
-                take = min(num_envs, episodes - collected)
                 parts.append({n: v[:take] for n, v in res.items()})
                 collected += take
-                if progress is not None:
-                    progress.update(take)
             merged = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
             done[level] = (summarize(source, perturbation, level, merged), merged)
             if cells is not None:
@@ -260,6 +279,55 @@ def evaluate_sweep(
     rows = [done[lv][0] for lv in levels]
     outcomes = [done[lv][1] for lv in levels]
     return (rows, outcomes) if return_outcomes else rows
+
+
+class _StepTicks:
+    """Advances a progress bar in episodes while a batch's steps run: after step t of T, the
+    batch's ``take`` episodes count (t + 1) / T done (in whole episodes)."""
+
+    def __init__(self, bar, steps: int):
+        self.bar, self.steps, self.take, self.shown = bar, int(steps), 0, 0
+
+    def start(self, take: int) -> None:
+        self.take, self.shown = int(take), 0
+
+    def step(self, t) -> None:
+        done = self.take * (int(t) + 1) // self.steps
+        if done > self.shown:
+            self.bar.update(done - self.shown)
+            self.shown = done
+
+    def finish(self) -> None:
+        self.step(self.steps - 1)
+        self.take = self.shown = 0  # a late call of this batch moves nothing
+
+
+def plan_line(plan, episodes: int, num_envs: int) -> str:
+    """The first line of an evaluation: its cells, episodes, an estimate of its time on 2 CPU
+    cores, and the quick form.
+
+    Args:
+      plan: sweep_plan's (source, perturbation, levels) list.
+      episodes, num_envs: eval.episodes per cell and the batch size.
+    """
+    cells = sum(len(levels) for _, _, levels in plan)
+    minutes = sum(len(lv) * episodes / 1000.0 * CPU_MIN_PER_1000[s] for s, _, lv in plan)
+    compiles = sum(1 if p in TRACED_PERTURBATIONS or p == "none" else len(lv) for _, p, lv in plan)
+    what = "; ".join(
+        f"{s} {p} {', '.join(f'{x:g}' for x in lv)}" if len(plan) <= 3 else f"{s} {p}"
+        for s, p, lv in plan
+    )
+    perts = {p for _, p, _ in plan}
+    quick = "--episodes 100"
+    if len(perts) > 1:
+        quick += " --perturbation none"
+    elif perts != {"none"}:  # one sweep per source: its first level
+        quick += f" --perturbation {plan[0][1]} --levels {plan[0][2][0]:g}"
+    return (
+        f"[evaluate] {cells} cell(s) x {episodes} episodes = {cells * episodes} ({what}; "
+        f"batches of {min(num_envs, episodes)}): ~{minutes + compiles * COMPILE_MIN:.0f} min on "
+        f"2 CPU cores with {compiles} compile(s). Quick look: {quick}"
+    )
 
 
 def sweep_plan(

@@ -15,8 +15,8 @@ levels U{0..2} (the old levels name other tiles now) and a fresh optimizer at pp
 price of the task is the one docs/campaign.md gives for it: +10 for arriving, -15 for a fall,
 ~-1.5 per episode for feet at an edge, 0 for standing still. The guidance bias, which decays by
 the run's iteration count (gone at 1500 in the teacher's run), is off: a new run would restart it
-(iterations 0-209 of runs/teacher_stones had it on, by mistake; off from 210 on). Issue "Stones, fourth round"; results:
-docs/campaign.md.
+(iterations 1-230 of runs/teacher_stones had it on, by mistake; off from 231 on). Issue "Stones,
+fourth round"; results: docs/campaign.md.
 """
 
 from configs import teacher_cpu

@@ -106,7 +106,9 @@ def test_old_override_names_the_new_field(script):
 
 
 @pytest.mark.parametrize(
-    "policy, config", [("stage1", "stage1_cpu.py"), ("flat", "flat.py")], ids=["stage1", "flat"]
+    "policy, config",
+    [("stage1", "stage1_cpu.py"), ("flat", "flat.py"), ("teacher", "teacher_cpu.py")],
+    ids=["stage1", "flat", "teacher"],
 )
 def test_shipped_policies_fit_this_code_for_resume(policy, config):
     """Every leaf of the shipped checkpoint fits the TrainState this code builds from the run's

@@ -77,7 +77,7 @@ SLURM = {
 def test_parse_env_reads_the_jax_and_slurm_variables():
     assert distributed.parse_env({}) is None  # one process: nothing starts
     assert distributed.parse_env({"HOME": "/root", "JAX_PLATFORMS": "cpu"}) is None
-    beat = distributed.HEARTBEAT_TIMEOUT_S
+    beat = 60  # the default heartbeat timeout [s] foottof/ppo/README_multihost.md documents
     assert distributed.parse_env(JAX3) == ("host0:1234", 2, 1, "env", beat)
     # A SLURM step of 4 tasks: count and id from SLURM, the address left to JAX (nodelist).
     assert distributed.parse_env(SLURM) == (None, 4, 3, "slurm", beat)

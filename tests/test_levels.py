@@ -245,33 +245,56 @@ def test_scan_sightings_on_hand_made_points():
 
 
 def test_world_scan_points_are_where_the_teacher_reads():
-    """observations.world_scan_points and foot_patch_points: the heights there, taken from a
-    made-up terrain function, equal the critic scan and foot patches the env computes (turned by
-    a 30 degree yaw: the first scan point x -0.6, y -0.4 lands at the hand-computed place)."""
+    """observations.world_scan_points, critic_height_scan, foot_patch_points and foot_patches
+    against hand-worked geometry. Base at (1, 2, z) turned 30 degrees: the first scan point
+    (x -0.6, y -0.4 in the base frame) lands at the hand-rotated place. On a plane rising
+    1 m per m along the heading, h = c x + s y (c, s = cos, sin 30 deg), a point at base-frame
+    (x, y) lies at height c + 2 s + x, so with the base at that height, z = c + 2 s, the scan
+    reads the documented grid's x (-0.6 to 1.2 m, 10 cm apart, the same in all 9 columns),
+    clipped at 1 m; on the plane rising across it, h = -s x + c y, it reads y (-0.4 to 0.4 m in
+    every row). Foot patches on h = x + 0.5 y, worked out below; a foot 2 m under the terrain
+    reads the 1 m clip."""
     import jax.numpy as jp
     import numpy as np
 
     from foottof.envs import observations as obs_lib
 
-    def height_at(p):
-        return jp.sin(3.0 * p[..., 0]) + 0.5 * p[..., 1] ** 2
-
     yaw = np.deg2rad(30.0)
+    c, s = np.cos(yaw), np.sin(yaw)
     quat = jp.array([np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2)])
     base = jp.array([1.0, 2.0, 0.5])
     pts = np.asarray(obs_lib.world_scan_points(base, quat))
-    c, s = np.cos(yaw), np.sin(yaw)
+    assert pts.shape == (19 * 9, 2)
     np.testing.assert_allclose(
         pts[0], [1.0 - 0.6 * c + 0.4 * s, 2.0 - 0.6 * s - 0.4 * c], atol=1e-6
     )
-    scan = obs_lib.critic_height_scan(height_at, base, quat)
-    np.testing.assert_allclose(scan, np.clip(height_at(pts) - 0.5, -1, 1), atol=1e-6)
-    feet = jp.array([[0.3, 0.2, 0.1], [0.3, -0.2, 0.0], [-0.3, 0.2, 0.05], [-0.3, -0.2, 0.0]])
+    grid_x = np.arange(-6, 13) / 10.0  # 19 rows: -0.6 .. 1.2 m
+    grid_y = np.arange(-4, 5) / 10.0  # 9 columns: -0.4 .. 0.4 m
+    along = obs_lib.critic_height_scan(
+        lambda p: c * p[..., 0] + s * p[..., 1], base.at[2].set(c + 2 * s), quat
+    )
+    want = np.repeat(np.minimum(grid_x, 1.0)[:, None], 9, axis=1)  # rows 1.1, 1.2 m clip to 1
+    np.testing.assert_allclose(np.asarray(along).reshape(19, 9), want, atol=1e-5)
+    across = obs_lib.critic_height_scan(
+        lambda p: -s * p[..., 0] + c * p[..., 1], base.at[2].set(-s + 2 * c), quat
+    )
+    np.testing.assert_allclose(
+        np.asarray(across).reshape(19, 9), np.repeat(grid_y[None], 19, axis=0), atol=1e-5
+    )
+
+    feet = jp.array([[0.3, 0.2, 0.1], [0.3, -0.2, 0.0], [-0.3, 0.2, 0.05], [-0.3, -0.2, -2.0]])
     fp = obs_lib.foot_patch_points(feet)
     assert fp.shape == (4, 9, 2)
     np.testing.assert_allclose(fp[2, 0], [-0.4, 0.1], atol=1e-6)  # offset (-0.1, -0.1)
-    patches = obs_lib.foot_patches(height_at, feet).reshape(4, 9)
-    np.testing.assert_allclose(patches, height_at(fp) - feet[:, None, 2], atol=1e-6)
+    patches = np.asarray(obs_lib.foot_patches(lambda p: p[..., 0] + 0.5 * p[..., 1], feet))
+    patches = patches.reshape(4, 3, 3)  # (foot, dx -0.1 / 0 / 0.1, dy -0.1 / 0 / 0.1)
+    # foot 2 at (-0.3, 0.2), 5 cm high: x + 0.5 y - 0.05 at x -0.4..-0.2, y 0.1..0.3
+    want2 = [[-0.4, -0.35, -0.3], [-0.3, -0.25, -0.2], [-0.2, -0.15, -0.1]]
+    np.testing.assert_allclose(patches[2], want2, atol=1e-6)
+    # foot 0 at (0.3, 0.2), 10 cm high: centre 0.3 + 0.1 - 0.1 = 0.3; +-0.1 per dx, +-0.05 per dy
+    np.testing.assert_allclose(patches[0, 1, 1], 0.3, atol=1e-6)
+    np.testing.assert_allclose(patches[0, 2, 0], 0.35, atol=1e-6)
+    np.testing.assert_allclose(patches[3], 1.0)  # 1.45 .. 1.75 m above the foot: clipped
 
 
 def test_sighting_summary_counts_steps_before_the_drop():

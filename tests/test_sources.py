@@ -628,6 +628,50 @@ def test_mock_sensors_at_a_gap_edge_hand_computed():
     np.testing.assert_allclose(r.incidence_rad[2:], ref.incidence_rad[2:], atol=1e-6)  # jit/eager
 
 
+def test_mock_sensor_exactly_on_the_surface_is_not_in_contact():
+    """The contact rule's boundary (sources.sense_mapped: contact only strictly below the
+    surface). Straight-down sensors with their origins exactly on flat ground at z = 0, on a
+    vertex and inside a cell: every ray starts on the surface, so it hits at 0 m (as mj_ray on
+    the same MuJoCo heightfield says), valid, and the zone's incidence is the angle between the
+    vertical and one of its rays (tx, ty, -1). Zone (i, j) spans tan angles -t + i t/2 ..
+    -t + (i + 1) t/2 on each axis (t = tan 22.5 deg), so its incidence lies between atan of
+    sqrt(tx^2 + ty^2) at its nearest and farthest corner: >= atan(t / 2) = 0.204 rad in the 12
+    zones off the centre, where contact would read 0. A micrometre lower the origins are inside
+    the solid: contact, 0 m, valid, incidence 0 in every zone."""
+    hf = _flat_hf(0.0)
+    down = jp.array([[1.0, 0, 0], [0, -1.0, 0], [0, 0, -1.0]]).T  # columns: site x, y, z axes
+    xy = [[2.0, 2.0], [2.013, 1.977]]  # a vertex of the 4 cm grid; inside a cell
+    on = jp.array([[*p, 0.0] for p in xy] * 2, jp.float32)
+    below = on.at[:, 2].set(-1e-6)
+    rot = jp.broadcast_to(down, (4, 3, 3))
+    sense = jax.jit(lambda p: sources.sense_mapped(TOF, hf, p, rot))  # one compile for both
+    r_on, r_below = sense(on), sense(below)
+
+    m, d = hfield_mj_model(hf)
+    t = math.tan(math.radians(22.5))
+    geom = np.zeros(1, np.int32)
+    for p in xy:
+        for ray in ([0.0, 0.0, -1.0], [-t, -t, -1.0], [t / 2, -t / 4, -1.0]):
+            origin = np.array([*p, 0.0])
+            assert mujoco.mj_ray(m, d, origin, np.array(ray), None, 1, -1, geom) == 0.0
+    np.testing.assert_array_equal(r_on.distance_m, 0.0)
+    assert bool(np.asarray(r_on.valid).all())
+    edges = -t + t / 2 * np.arange(5)  # zone boundaries in tan angle
+    near = np.where(edges[:-1] * edges[1:] < 0, 0.0, np.minimum(abs(edges[:-1]), abs(edges[1:])))
+    far = np.maximum(abs(edges[:-1]), abs(edges[1:]))
+    lo = np.arctan(np.hypot(near[:, None], near[None, :])).reshape(-1)  # (16,) zone (i, j)
+    hi = np.arctan(np.hypot(far[:, None], far[None, :])).reshape(-1)
+    inc = np.asarray(r_on.incidence_rad)  # (4, 16)
+    assert (inc >= lo - 1e-5).all() and (inc <= hi + 1e-5).all(), (inc, lo, hi)
+    off_centre = np.ones((4, 4), bool)
+    off_centre[1:3, 1:3] = False
+    assert (inc[:, off_centre.reshape(-1)] > 0.2).all(), inc
+
+    np.testing.assert_array_equal(r_below.distance_m, 0.0)
+    assert bool(np.asarray(r_below.valid).all())
+    np.testing.assert_array_equal(r_below.incidence_rad, 0.0)
+
+
 def test_jit_equals_no_jit(stones_hf):
     """Scan, sensor poses and map update: eager == jit (the ray caster's own jit == no-jit is
     tested with foottof.sensors)."""

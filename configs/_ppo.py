@@ -24,6 +24,9 @@ def get_section() -> ml_collections.ConfigDict:
     c.entropy_coef = 0.005  # weight of the entropy bonus
     c.max_grad_norm = 1.0  # global gradient-norm clip
     c.normalize_advantage = True  # standardize advantages over the whole rollout batch
+    # left-right mirror symmetry: the mirrored copy of every rollout sequence joins its minibatch,
+    # starting from the LSTM carry the policy has on the mirrored episode (foottof.ppo.symmetry)
+    c.symmetry = False
     return c
 
 

@@ -285,6 +285,7 @@ RULES = {
     "ppo.entropy_coef": _nonneg,
     "ppo.max_grad_norm": _pos,
     "ppo.normalize_advantage": _bool,
+    "ppo.symmetry": _bool,
     "network.policy": _choice(*POLICIES),
     "network.lstm_hidden_size": _int(1),
     "network.lstm_num_layers": _int(1),

@@ -47,6 +47,7 @@ ADDED_FIELDS = {
     "reward.scales.overspeed": 0.0,  # off: base speed is not penalized
     "reward.overspeed_mps": 0.6,  # read only when the overspeed term is on
     "terrain.stone_curriculum": "gaps_first",  # stones shrink last (tiles.STONE_CURRICULA)
+    "ppo.symmetry": False,  # off: no mirrored copies of the rollout sequences
 }
 # Config fields removed (2026-12-07, twenty-ninth session: experiment flags no shipped policy or
 # documented config used), with the default at which the behaviour was the code's of today. A

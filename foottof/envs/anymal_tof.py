@@ -15,6 +15,7 @@ from foottof import constants
 from foottof.envs import observations as obs_lib
 from foottof.envs import rewards as rw
 from foottof.envs import sensing
+from foottof.envs import symmetry
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
 from foottof.envs.seen_map import SeenGrid
 from foottof.envs.sensing import select_where
@@ -185,6 +186,11 @@ class AnymalToFEnv(Env):
     @property
     def backend(self) -> str:
         return self.physics.name  # "mjx" | "mujoco"
+
+    @property
+    def mirror(self) -> symmetry.Mirror:
+        """The left-right mirror maps of this env's observations and actions (ppo.symmetry)."""
+        return symmetry.make_mirror(self.cfg)
 
     def reset(self, rng: jax.Array) -> State:
         """Starts an episode on a random tile at curriculum level drawn from the initial range."""

@@ -44,7 +44,8 @@ ITEMS = {
     "opt_state": ("opt_state",),
     "normalizer": ("normalizer",),
     "progress": ("key", "iteration"),
-    "rollout": ("env_state", "carry", "prev_done", "ep_return", "ep_length"),
+    # mirror_carry: None (no leaves) unless ppo.symmetry, so other runs save what they did before
+    "rollout": ("env_state", "carry", "prev_done", "ep_return", "ep_length", "mirror_carry"),
 }
 
 

@@ -51,6 +51,21 @@ class TeacherEnv:
     def __getattr__(self, name):
         return getattr(self.env, name)
 
+    @property
+    def mirror(self):
+        """The mirror maps of the student's rollout (ppo.symmetry, foottof.ppo.symmetry): the
+        student's view (the first ``student_obs_size`` of the teacher's inputs), the teacher's
+        inputs and its action (a mirrored sequence's label: the mirror of the teacher's action)."""
+        from foottof.envs.symmetry import Mirror
+
+        inner = self.env.mirror
+        teacher = inner.obs[net.ACTOR_KEY]
+        obs = dict(inner.obs)
+        obs[net.ACTOR_KEY] = teacher.first(self.student_obs_size)
+        obs[TEACHER_OBS_KEY] = teacher
+        obs[TEACHER_ACTION_KEY] = inner.action
+        return Mirror(obs, inner.action)
+
     def _wrap(self, state: State, carry, reset: jax.Array) -> State:
         """The inner state seen by the student, with the teacher's action for its observation."""
         obs = state.obs

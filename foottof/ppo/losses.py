@@ -21,6 +21,9 @@ class Minibatch(NamedTuple):
     values: jax.Array  # (T, B) V_old(s_t)
     advantages: jax.Array  # (T, B) (normalized) GAE advantages
     returns: jax.Array  # (T, B) value targets = GAE advantages + values
+    # ppo.symmetry: the policy's carry at the rollout start on the mirrored observations, (B, H)
+    # leaves (foottof.ppo.symmetry); None without it
+    mirror_carry: Any = None
 
 
 def bootstrap_truncation(
@@ -83,8 +86,12 @@ def ppo_loss(
     value_loss_coef: float,
     entropy_coef: float,
     use_clipped_value_loss: bool,
+    kl_envs: int | None = None,
 ) -> tuple[jax.Array, dict[str, jax.Array]]:
     """Clipped surrogate + (clipped) value loss - entropy bonus, averaged over (T, B).
+
+    ``kl_envs`` (static): the KL (the adaptive rate's) over the first ``kl_envs`` envs only, the
+    rollout's own sequences when mirrored copies follow them (ppo.symmetry, as rsl_rl); None: all.
 
     Returns:
       (loss, metrics) with 'loss/policy', 'loss/value', 'loss/entropy' (the entropy, not its
@@ -121,7 +128,7 @@ def ppo_loss(
         "loss/policy": policy_loss,
         "loss/value": value_loss,
         "loss/entropy": entropy,
-        "ppo/kl": jp.mean(kl),
+        "ppo/kl": jp.mean(kl if kl_envs is None else kl[:, :kl_envs]),
         "ppo/clip_fraction": jax.lax.stop_gradient(clip_fraction),
     }
     return loss, metrics

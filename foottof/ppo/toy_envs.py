@@ -38,6 +38,21 @@ class CueMemoryEnv:
         self.teacher = bool(teacher)
 
     @property
+    def mirror(self):
+        """The task's mirror (ppo.symmetry): the cue and the action change sign (c -> -c,
+        a -> -a pays the same reward), the first-step flag stays."""
+        from foottof.envs.symmetry import Mirror, SignedPerm
+
+        state = SignedPerm([0, 1], [-1.0, 1.0])
+        full = SignedPerm([0, 1, 2], [-1.0, 1.0, -1.0])  # state + cue
+        action = SignedPerm([0], [-1.0])
+        if self.teacher:
+            return Mirror({"state": full, "privileged_state": full}, action)
+        if self.privileged:
+            return Mirror({"state": state, "privileged_state": full}, action)
+        return Mirror(state, action)
+
+    @property
     def observation_size(self):
         if self.teacher:
             return {"state": (3,), "privileged_state": (3,)}

@@ -30,6 +30,7 @@ from foottof import config_check
 from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-exported)
 from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
 from foottof.ppo import distill, losses
+from foottof.ppo import symmetry as sym
 from foottof.ppo import networks as net
 from foottof.renames import read_added
 
@@ -52,6 +53,9 @@ class TrainState:
     ep_length: jax.Array  # (N,) steps of the running episode so far
     key: jax.Array  # (2,) uint32 PRNG key of the next iteration
     iteration: jax.Array  # () int32 completed iterations
+    # ppo.symmetry: the policy's LSTM carry on the mirrored observations (foottof.ppo.symmetry),
+    # (N, H) leaves (sharded over 'data'); None (no leaves) without it
+    mirror_carry: Any = None
 
 
 class Transition(NamedTuple):
@@ -77,6 +81,7 @@ class Batch(NamedTuple):
     traj: Transition  # leaves (T, N, ...)
     carry: Any  # LSTM carry before the rollout's first step, (N, H) leaves
     last_value: jax.Array  # (N,) value of the state after the last step
+    mirror_carry: Any = None  # ppo.symmetry: the mirrored sequences' first carry, (N, H) leaves
 
 
 class Train(NamedTuple):
@@ -160,6 +165,8 @@ class Settings:
     use_clipped_value_loss: bool
     distilling: bool  # train.teacher set: the imitation loss (foottof.ppo.distill) replaces PPO's
     reconstruction_weight: float = 0.0  # distillation with a belief decoder (network.reconstruct)
+    symmetry: bool = False  # ppo.symmetry: mirrored copies of the sequences join each minibatch
+    mirror: Any = None  # with symmetry: the env's mirror maps (foottof.envs.symmetry.Mirror)
 
     @classmethod
     def from_config(cls, cfg: ml_collections.ConfigDict) -> "Settings":
@@ -182,6 +189,7 @@ class Settings:
             use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
             distilling=bool(train_cfg is not None and read_added(train_cfg, "train.teacher")),
             reconstruction_weight=float(read_added(ppo, "ppo.reconstruction_weight")),
+            symmetry=bool(read_added(ppo, "ppo.symmetry")),
         )
 
     def loss_kwargs(self) -> dict:
@@ -199,12 +207,16 @@ class Settings:
 # ``axis_name=AXIS``): their collectives reduce over AXIS.
 
 
-def init_state(env, networks: net.Networks, optimizer, mesh: Mesh, num_envs: int, obs_example, key):
+def init_state(
+    env, networks: net.Networks, optimizer, mesh: Mesh, num_envs: int, obs_example, key,
+    symmetry: bool = False,
+):  # fmt: skip
     """A fresh TrainState: network, optimizer and normalizer initialized, every env reset.
 
     Args:
       obs_example: an observation with a batch axis of 1 (shapes the network's inputs).
       key: (2,) PRNG key; split into the params, the env resets and the next iteration's key.
+      symmetry: also a fresh carry for the mirrored observations (ppo.symmetry).
     """
     key_params, key_env, key_next = jax.random.split(key, 3)
     params = networks.init_params(key_params, obs_example)
@@ -223,6 +235,7 @@ def init_state(env, networks: net.Networks, optimizer, mesh: Mesh, num_envs: int
         params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
         carry=carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
         key=key_next, iteration=jp.zeros((), jp.int32),
+        mirror_carry=jax.tree.map(jp.zeros_like, carry) if symmetry else None,
     )  # fmt: skip
 
 
@@ -238,19 +251,28 @@ def _reset_envs(env, networks: net.Networks, keys):
     )
 
 
-def rollout_step(env, networks: net.Networks, params, normalizer, log_std, carry, key_step):
+def rollout_step(
+    env, networks: net.Networks, params, normalizer, log_std, carry, key_step, mirror=None
+):
     """One env step of the rollout: act ~ N(mean, std), step the envs, book the episode.
 
     Args:
       log_std: (A,) log std of the actions.
-      carry: (env_state, LSTM carry, prev_done (N,), ep_return (N,), ep_length (N,)).
+      carry: (env_state, LSTM carry, prev_done (N,), ep_return (N,), ep_length (N,)), and with
+        ``mirror`` the carry on the mirrored observations last.
       key_step: (2,) PRNG key of this step's action noise.
+      mirror: ppo.symmetry: the env's mirror maps; the policy also steps on the mirrored
+        observation (foottof.ppo.symmetry.mirror_carry_step), only for its carry.
 
     Returns:
       (the next carry, this step's Transition (leaves (N, ...))).
     """
-    env_state, net_carry, prev_done, ep_return, ep_length = carry
+    env_state, net_carry, prev_done, ep_return, ep_length = carry[:5]
     obs = env_state.obs
+    mirrored = ()
+    if mirror is not None:  # static
+        args = (networks, params, normalizer, mirror, carry[5], obs, prev_done)
+        mirrored = (sym.mirror_carry_step(*args),)
     net_carry, mean, _, value = networks.step(params, normalizer, net_carry, obs, prev_done)
     action = mean + jp.exp(log_std) * jax.random.normal(key_step, mean.shape)  # ~ N(mean, std)
     log_prob = net.gaussian_log_prob(action, mean, log_std)
@@ -269,11 +291,15 @@ def rollout_step(env, networks: net.Networks, params, normalizer, log_std, carry
     )  # fmt: skip
     ep_return = jp.where(done, 0.0, ep_return)
     ep_length = jp.where(done, 0.0, ep_length)
-    return (env_state, net_carry, done, ep_return, ep_length), tr
+    return (env_state, net_carry, done, ep_return, ep_length) + mirrored, tr
 
 
-def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int):
+def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int, mirror=None):
     """``num_steps`` steps of the envs in `state` under its policy (no collectives).
+
+    Args:
+      mirror: ppo.symmetry: the env's mirror maps; the carry on the mirrored observations
+        (``state.mirror_carry``) steps along and comes last in the returned carry.
 
     Returns:
       (the carry after the last step (as rollout_step's), Transition with leaves (T, N, ...),
@@ -283,8 +309,11 @@ def rollout(env, networks: net.Networks, state: TrainState, key, num_steps: int)
     log_std = networks.action_log_std(params)
     step = functools.partial(rollout_step, env, networks, params, normalizer, log_std)
     carry0 = (state.env_state, state.carry, state.prev_done, state.ep_return, state.ep_length)
+    if mirror is not None:  # static
+        step = functools.partial(step, mirror=mirror)
+        carry0 = carry0 + (state.mirror_carry,)
     carry, traj = jax.lax.scan(step, carry0, jax.random.split(key, num_steps))
-    env_state, net_carry, prev_done, _, _ = carry
+    env_state, net_carry, prev_done = carry[:3]
     _, _, _, last_value = networks.step(params, normalizer, net_carry, env_state.obs, prev_done)
     return carry, traj, last_value
 
@@ -300,6 +329,10 @@ def sgd_step(networks: net.Networks, optimizer, settings: Settings, carry, mb: l
       step used) and 'ppo/grad_norm').
     """
     params, opt_state, normalizer = carry
+    loss_kwargs = settings.loss_kwargs()
+    if settings.symmetry:  # static: the mirrored copies of the minibatch's sequences join it
+        loss_kwargs["kl_envs"] = mb.advantages.shape[1]  # the KL over the originals (rsl_rl)
+        mb = sym.augment(mb, settings.mirror)
     if settings.distilling:  # static
         grad_fn = jax.value_and_grad(distill.distill_loss, has_aux=True)
         (_, metrics), grads = grad_fn(
@@ -307,7 +340,7 @@ def sgd_step(networks: net.Networks, optimizer, settings: Settings, carry, mb: l
         )
     else:
         grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
-        (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **settings.loss_kwargs())
+        (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
     grads = jax.lax.pmean(grads, AXIS)
     metrics = jax.lax.pmean(metrics, AXIS)
     if settings.adaptive_lr:
@@ -349,6 +382,7 @@ def epoch_minibatches(data: losses.Minibatch, key, num_minibatches: int) -> loss
             log_probs=data.log_probs[:, i], means=data.means[:, i], log_std=data.log_std,
             values=data.values[:, i], advantages=data.advantages[:, i],
             returns=data.returns[:, i],
+            mirror_carry=jax.tree.map(lambda x: x[i], data.mirror_carry),
         )  # fmt: skip
 
     minibatches = jax.vmap(take)(idx)  # leading minibatch axis
@@ -375,7 +409,7 @@ def local_update(
       (params, opt_state, normalizer, metrics with leaves (num_epochs, num_minibatches)).
     """
     key_update = jax.random.fold_in(key_update, jax.lax.axis_index(AXIS))
-    traj, carry_start, last_value = batch
+    traj, carry_start, last_value = batch.traj, batch.carry, batch.last_value
     gamma = settings.gamma
     rewards = losses.bootstrap_truncation(traj.rewards, traj.values, traj.truncation, gamma)
     advantages, returns = losses.compute_gae(
@@ -390,6 +424,7 @@ def local_update(
         carry=carry_start, obs=traj.obs, resets=traj.resets, actions=traj.actions,
         log_probs=traj.log_probs, means=traj.means, log_std=networks.action_log_std(params),
         values=traj.values, advantages=advantages, returns=returns,
+        mirror_carry=batch.mirror_carry,
     )  # fmt: skip
     sgd = functools.partial(sgd_step, networks, optimizer, settings)
     (new_params, opt_state, _), sgd_metrics = jax.lax.scan(
@@ -414,9 +449,10 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
     # Each device gets its own rollout stream; the state key stays replicated.
     key_rollout = jax.random.fold_in(key_rollout, jax.lax.axis_index(AXIS))
     carry_start = state.carry  # stored initial carry of this rollout (before any reset)
-    (env_state, net_carry, prev_done, ep_return, ep_length), traj, last_value = rollout(
-        env, networks, state, key_rollout, settings.num_steps
-    )
+    mirror = settings.mirror if settings.symmetry else None
+    carry, traj, last_value = rollout(env, networks, state, key_rollout, settings.num_steps, mirror)
+    env_state, net_carry, prev_done, ep_return, ep_length = carry[:5]
+    mirror_carry = carry[5] if mirror is not None else None
     params, opt_state, normalizer, sgd_metrics = local_update(
         networks,
         optimizer,
@@ -424,7 +460,7 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
         state.params,
         state.opt_state,
         state.normalizer,
-        Batch(traj, carry_start, last_value),
+        Batch(traj, carry_start, last_value, state.mirror_carry),
         key_update,
     )
     log_std = networks.action_log_std(params)
@@ -432,7 +468,7 @@ def local_iteration(env, networks: net.Networks, optimizer, settings: Settings, 
     new_state = TrainState(
         params=params, opt_state=opt_state, normalizer=normalizer, env_state=env_state,
         carry=net_carry, prev_done=prev_done, ep_return=ep_return, ep_length=ep_length,
-        key=key, iteration=state.iteration + 1,
+        key=key, iteration=state.iteration + 1, mirror_carry=mirror_carry,
     )  # fmt: skip
     return new_state, metrics
 
@@ -481,6 +517,8 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     devices = list(jax.devices() if devices is None else devices)
     _validate(cfg, len(devices))
     settings = Settings.from_config(cfg)
+    if settings.symmetry:  # static: the env's mirror maps ride along with the static settings
+        settings = dataclasses.replace(settings, mirror=sym.env_mirror(env))
     num_envs = int(ppo.num_envs)
     networks = net.make_networks(env.action_size, cfg.network)
     optimizer = _make_optimizer(float(ppo.learning_rate), float(ppo.max_grad_norm))
@@ -494,8 +532,12 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
     spec = TrainState(
         params=P(), opt_state=P(), normalizer=P(), env_state=P(AXIS), carry=P(AXIS),
         prev_done=P(AXIS), ep_return=P(AXIS), ep_length=P(AXIS), key=P(), iteration=P(),
+        mirror_carry=P(AXIS) if settings.symmetry else None,
     )  # fmt: skip
-    init_fn = functools.partial(init_state, env, networks, optimizer, mesh, num_envs, obs_example)
+    init_fn = functools.partial(
+        init_state, env, networks, optimizer, mesh, num_envs, obs_example,
+        symmetry=settings.symmetry,
+    )  # fmt: skip
     state_shape = jax.eval_shape(init_fn, jax.ShapeDtypeStruct((2,), jp.uint32))
     state_spec = _tree_spec(spec, state_shape)
     state_sharding = jax.tree.map(
@@ -509,10 +551,11 @@ def make_train(env, cfg: ml_collections.ConfigDict, devices=None) -> Train:
         check_vma=False,
     )
     # The update alone (tests: the same batch on 1 device and split over several).
+    mirror_spec = P(AXIS) if settings.symmetry else None
     update_sharded = jax.shard_map(
         functools.partial(local_update, networks, optimizer, settings),
         mesh=mesh,
-        in_specs=(P(), P(), P(), Batch(P(None, AXIS), P(AXIS), P(AXIS)), P()),
+        in_specs=(P(), P(), P(), Batch(P(None, AXIS), P(AXIS), P(AXIS), mirror_spec), P()),
         out_specs=P(),
         check_vma=False,
     )

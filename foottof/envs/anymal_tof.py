@@ -14,8 +14,7 @@ from flax import struct
 from foottof import constants
 from foottof.envs import observations as obs_lib
 from foottof.envs import rewards as rw
-from foottof.envs import sensing
-from foottof.envs import symmetry
+from foottof.envs import sensing, symmetry
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
 from foottof.envs.seen_map import SeenGrid
 from foottof.envs.sensing import select_where

@@ -29,7 +29,6 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Mapping, Sequence
 
-import jax
 import jax.numpy as jp
 import numpy as np
 

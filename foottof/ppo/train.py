@@ -30,8 +30,8 @@ from foottof import config_check
 from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-exported)
 from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
 from foottof.ppo import distill, losses
-from foottof.ppo import symmetry as sym
 from foottof.ppo import networks as net
+from foottof.ppo import symmetry as sym
 from foottof.renames import read_added
 
 AXIS = "data"  # mesh axis over envs (all devices of all hosts)

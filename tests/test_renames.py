@@ -107,8 +107,13 @@ def test_old_override_names_the_new_field(script):
 
 @pytest.mark.parametrize(
     "policy, config",
-    [("stage1", "stage1_cpu.py"), ("flat", "flat.py"), ("teacher", "teacher_cpu.py")],
-    ids=["stage1", "flat", "teacher"],
+    [
+        ("stage1", "stage1_cpu.py"),
+        ("flat", "flat.py"),
+        ("teacher", "teacher_cpu.py"),
+        ("teacher_stones", "experiments/teacher_stones_cpu.py"),  # the line in training
+    ],
+    ids=["stage1", "flat", "teacher", "teacher_stones"],
 )
 def test_shipped_policies_fit_this_code_for_resume(policy, config):
     """Every leaf of the shipped checkpoint fits the TrainState this code builds from the run's

@@ -4,7 +4,7 @@ VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: demo learn wheels test test-multiprocess test-slow lint bench terrain-png render-deps clean
+.PHONY: demo learn wheels test test-integration test-slow lint bench terrain-png render-deps clean
 
 $(STAMP): pyproject.toml
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
@@ -43,14 +43,15 @@ test: $(STAMP) render-deps
 	$(VENV)/bin/ruff check .
 	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 --dist loadfile --no-loadscope-reorder -q
 
-# The multi-process guarantees, run by CI after `make test` (145 s of CPU; 15 min on a crowded
-# 2-core box: bench/NOTES.md item 18): the slow tests of tests/test_distributed.py, each with 2
-# processes on localhost. 2 processes x 1 device equal 1 process x 2 devices through a resume; a
-# killed process stops the run in one line and a resume continues; a hung one ends the others
-# within the heartbeat; train.py checks the env count against both processes' devices. One test
-# at a time (no -n).
-test-multiprocess: $(STAMP)
-	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q tests/test_distributed.py
+# What CI runs after `make test`, kept out of the fast suite by their length: the multi-process
+# guarantees (145 s of CPU; 15 min on a crowded 2-core box: bench/NOTES.md item 18), the slow
+# tests of tests/test_distributed.py, each with 2 processes on localhost (2 processes x 1 device
+# equal 1 process x 2 devices through a resume; a killed process stops the run in one line and a
+# resume continues; a hung one ends the others within the heartbeat; train.py checks the env
+# count against both processes' devices); and the GPU check's --dry_run (~4.5 min of MJX
+# compiles on the CPU: tests/test_gpu_check.py). One test at a time (no -n).
+test-integration: $(STAMP)
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q tests/test_distributed.py tests/test_gpu_check.py
 
 test-slow: $(STAMP)
 	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q

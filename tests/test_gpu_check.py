@@ -95,6 +95,7 @@ def dry_run(tmp_path_factory):
     return r, work
 
 
+@pytest.mark.slow  # ~4.5 min of MJX compiles on 2 CPU cores: CI runs it in `make test-integration`
 def test_dry_run_times_each_step_trains_the_teacher_and_hands_back_its_checkpoint(dry_run):
     """The whole check on the CPU at 32 envs: one table, every step ok, the teacher's
     metrics.csv and a checkpoint that passes its SHA-256 record, in --out."""

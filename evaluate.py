@@ -54,84 +54,6 @@ _UNTRAINED = flags.DEFINE_bool(
 REPO_ROOT = os.path.dirname(os.path.abspath(__file__))
 
 
-def _check_analyze(sources, plan) -> None:
-    if len(sources) != 1:
-        raise ValueError("--analyze needs one --source, not 'all'")
-    if len(plan) != 1 or len(plan[0][2]) != 1:
-        perts = sorted({p for _, p, _ in plan})
-        levels = [lv for _, _, lvs in plan for lv in lvs]
-        raise ValueError(
-            f"--analyze runs one cell: give one perturbation and one level "
-            f"(--levels), got {'/'.join(perts)} with levels {levels}"
-        )
-    if _VIDEO_STRIDE.value < 1:
-        raise ValueError(f"--video_stride {_VIDEO_STRIDE.value}: must be >= 1")
-
-
-def _analyze(cfg, plan, ckpt, key, out: str) -> None:
-    """One episode: analysis PNG, trace (.npz) and rollout video with the ToF rays."""
-    from tqdm import tqdm
-
-    from foottof.eval import analysis
-
-    source, pert, (level,) = plan[0]
-    env, trace = analysis.record_episode(cfg, source, ckpt, key, pert, level)
-    tag = source if pert == "none" else f"{source}_{pert}_{level:g}"
-    written = analysis.write_analysis(
-        env,
-        trace,
-        out,
-        tag,
-        _VIDEO.value,
-        _VIDEO_STRIDE.value,
-        progress=lambda n: tqdm(total=n, unit="frame", desc="render"),
-    )
-    print(
-        f"[evaluate] episode: {len(trace['qpos'])} steps, success={trace['success']}, "
-        f"failed={trace['failed']}; wrote {', '.join(written)}"
-    )
-
-
-EXPORT_FORMATS = (".npz", ".onnx")
-
-
-def _check_export_path(path: str) -> None:
-    """ValueError naming the bad path: an unknown suffix or a folder that does not exist."""
-    suffix = os.path.splitext(path)[1].lower()
-    if suffix not in EXPORT_FORMATS:
-        raise ValueError(
-            f"--export {path!r}: unknown suffix {suffix or '(none)'!r}; valid: "
-            f"{', '.join(EXPORT_FORMATS)} (the suffix picks the format)"
-        )
-    folder = os.path.dirname(os.path.abspath(path))
-    if not os.path.isdir(folder):
-        raise ValueError(f"--export {path!r}: folder {folder!r} does not exist")
-    if os.path.isdir(path):
-        raise ValueError(f"--export {path!r} is a folder; give a file name ending in {suffix}")
-
-
-def _export(cfg, source: str, ckpt, key) -> None:
-    """The policy's actor as a NumPy .npz (foottof.ppo.export) or ONNX model (export_onnx)."""
-    from foottof.eval.harness import make_eval_env_and_policy
-
-    env, nets, params, norm = make_eval_env_and_policy(cfg, source, ckpt, key, key)
-    if _EXPORT.value.lower().endswith(".onnx"):
-        try:
-            from foottof.ppo import export_onnx
-        except ImportError as e:
-            raise RuntimeError(
-                f"--export {_EXPORT.value!r}: ONNX export needs the 'export' extra "
-                f"(pip install -e '.[export]'): {e}"
-            ) from None
-        meta = export_onnx.deployment_metadata(cfg, env, ckpt)
-        path = export_onnx.export_onnx(_EXPORT.value, nets, params, norm, meta)
-    else:
-        from foottof.ppo.export import export_policy
-
-        path = export_policy(_EXPORT.value, nets, params, norm)
-    print(f"[evaluate] wrote {path}")
-
-
 def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
     """The finished-cell store of this evaluation (foottof.eval.cells): a rerun of an
     interrupted command loads the cells it already finished."""
@@ -156,7 +78,7 @@ def main(argv):
     import jax
     from tqdm import tqdm
 
-    from foottof.eval import results
+    from foottof.eval import modes, results
     from foottof.eval import robustness as rb
     from foottof.perception import check_source
     from foottof.ppo.run_dir import (
@@ -179,9 +101,9 @@ def main(argv):
         if not (_ANALYZE.value or _EXPORT.value):
             print(rb.plan_line(plan, int(cfg.eval.episodes), int(cfg.eval.num_envs)), flush=True)
         if _ANALYZE.value:  # flags checked before any policy is looked for or env built
-            _check_analyze(sources, plan)
+            modes.check_analyze(sources, plan, _VIDEO_STRIDE.value)
         if _EXPORT.value:
-            _check_export_path(_EXPORT.value)
+            modes.check_export_path(_EXPORT.value)
         ckpt = resolve_checkpoint(_CHECKPOINT.value, _UNTRAINED.value, REPO_ROOT)
         overrides = config_flags.get_override_values(flags.FLAGS["config"])
         cfg = with_run_network(cfg, ckpt, overrides)
@@ -194,10 +116,10 @@ def main(argv):
         print(f"[evaluate] policy: {ckpt or 'untrained (fresh init)'} ({acts})")
         key = jax.random.PRNGKey(int(cfg.eval.seed))
         if _EXPORT.value:
-            _export(cfg, sources[0], ckpt, key)
+            modes.export(cfg, sources[0], ckpt, key, _EXPORT.value)
             return
         if _ANALYZE.value:
-            _analyze(cfg, plan, ckpt, key, out)
+            modes.analyze(cfg, plan, ckpt, key, out, _VIDEO.value, _VIDEO_STRIDE.value)
             return
         draws = results.episode_draws(cfg)
         store = _cell_store(cfg, out, ckpt, draws)

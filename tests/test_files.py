@@ -7,6 +7,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 
 import pytest
 from etils import epath
@@ -172,50 +173,84 @@ def test_a_lock_left_by_a_killed_process_is_taken_over(tmp_path, capfd):
 
 # -------------------------------------------------------------------- two evaluations, one --out
 _WRITER = """
-import sys
+import os, sys, time
 from foottof.eval import results
-out, source, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+out, source, pause = sys.argv[1], sys.argv[2], sys.argv[3]
+if pause != "-":  # stop before the first rename, once every temporary file is written
+    real = os.replace
+    def replace(src, dst):
+        os.replace = real
+        open(pause + ".paused", "w").close()
+        while not os.path.exists(pause + ".go"):
+            time.sleep(0.01)
+        real(src, dst)
+    os.replace = replace
 ENSEMBLE = dict(difficulty_fraction=0.9, stone_fraction=0.8, stone_types=["a"], gap_types=["b"],
                 deterministic=True, action_std_cap=None, fingerprint="f")
 assert tuple(ENSEMBLE) == results.ENSEMBLE_KEYS
 row = dict.fromkeys(results.RESULT_KEYS, 0)
-row.update(source=source, perturbation="none", level=0.0, episodes=10, successes=5,
-           success_rate=0.5, ci_low=0.2, ci_high=0.8)
-for i in range(n):
-    results.write_run(out, source, "none", [dict(row, successes=i % 10)], None, 20.0,
-                      ensemble=ENSEMBLE)
+row.update(source=source, perturbation="none", level=0.0, episodes=10, successes=7,
+           success_rate=0.7, ci_low=0.4, ci_high=0.9)
+results.write_run(out, source, "none", [row], None, 20.0, ensemble=ENSEMBLE)
 print("done", flush=True)
 """
 
 
+def _write_results(out, source: str, pause: str = "-") -> subprocess.Popen:
+    """evaluate.py's writer (results.write_run) of one result row of `source` into `out`, in a
+    process of its own; with `pause`, it stops before its first rename (every temporary file
+    written) until the file `pause`.go exists, and says so by creating `pause`.paused."""
+    return subprocess.Popen(
+        [sys.executable, "-c", _WRITER, str(out), source, pause],
+        cwd=REPO,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
 def test_two_evaluations_into_one_out_leave_both_results_readable(tmp_path):
-    """Two evaluate.py runs writing their results into one --out at the same time (here their
-    writer, results.write_run, 30 times each, for two sources): every write succeeds, both
-    results files read back whole, and no temporary file is left."""
-    out = str(tmp_path / "out")
-    procs = [
-        subprocess.Popen(
-            [sys.executable, "-c", _WRITER, out, source, "30"],
-            cwd=REPO,
-            stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
-            text=True,
-        )
-        for source in ("tof", "mock_ideal")
-    ]
-    for p in procs:
-        stdout, stderr = p.communicate(timeout=300)
-        assert p.returncode == 0 and stdout.strip() == "done", stderr[-2000:]
+    """Two evaluate.py runs write their results into one --out, interleaved at the worst point:
+    the first has written all its files' temporaries (its results and the shared figure,
+    robustness.png) but renamed none when the second writes and renames all of its own; then
+    the first goes on. Both must succeed, and leave both results files whole, a whole figure
+    and no temporary file (with one temporary name per target, `robustness.png.tmp`, the second
+    run's write replaced the first one's temporary and the first run's rename failed)."""
     import json
 
     from foottof.eval import results
 
+    out, pause = tmp_path / "out", str(tmp_path / "first")
+    first = _write_results(out, "tof", pause)
+    try:
+        while not os.path.exists(pause + ".paused"):
+            assert first.poll() is None, first.communicate()[1][-2000:]
+            time.sleep(0.01)
+        second = _write_results(out, "mock_ideal")
+        stdout, stderr = second.communicate(timeout=300)
+        assert second.returncode == 0 and stdout.strip() == "done", stderr[-2000:]
+        open(pause + ".go", "w").close()
+        stdout, stderr = first.communicate(timeout=300)
+    finally:
+        first.kill()
+    assert first.returncode == 0 and stdout.strip() == "done", stderr[-2000:]
     for source in ("tof", "mock_ideal"):
-        with open(os.path.join(out, results.result_basename(source, "none") + ".json")) as f:
+        with open(out / (results.result_basename(source, "none") + ".json")) as f:
             doc = json.load(f)
-        assert doc["results"][0]["source"] == source and doc["results"][0]["successes"] == 9
-    assert not [n for n in os.listdir(out) if n.endswith(".tmp")]
-    assert os.path.getsize(os.path.join(out, "robustness.png")) > 0
+        assert [(r["source"], r["successes"]) for r in doc["results"]] == [(source, 7)]
+        with open(out / (results.result_basename(source, "none") + ".csv")) as f:
+            assert [r["source"] for r in csv.DictReader(f)] == [source]
+    assert sorted(os.listdir(out)) == [
+        "results_mock_ideal_none.csv",
+        "results_mock_ideal_none.json",
+        "results_tof_none.csv",
+        "results_tof_none.json",
+        "robustness.png",
+    ]
+    from PIL import Image
+
+    with Image.open(out / "robustness.png") as png:
+        png.load()  # whole: a torn PNG raises here
 
 
 def test_write_atomic_gives_each_writer_its_own_temporary(tmp_path, monkeypatch):

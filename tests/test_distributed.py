@@ -548,3 +548,35 @@ def test_a_process_lost_during_the_first_compile_stops_the_others_in_one_line():
     ), r.stderr[-3000:]
     assert "stack trace" not in r.stderr and "Traceback" not in r.stderr
     assert stop_s < 6, stop_s  # within the heartbeat timeout
+
+
+def test_the_coordinator_lost_during_the_first_compile_stops_the_others_in_one_line():
+    """As above, but process 0 is killed: the coordination service goes with it, and JAX ends
+    process 1 at once (its poll of the service fails) with a fatal log, a stack dump and
+    SIGABRT. Process 1 must stop instead with one line naming process 0 as the coordinator that
+    is gone, and EXIT_PROCESS_LOST, within the heartbeat timeout; before it only the runtime's
+    own log lines (warnings and errors of its RPCs, not its fatal one)."""
+    procs = _start([sys.executable, WORKER, "stall"], 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="6")
+    try:
+        for p in procs:
+            line = p.stdout.readline()
+            assert line.startswith("[worker] started"), _finish(p, 30).stderr[-3000:]
+        procs[0].send_signal(signal.SIGKILL)
+        killed = time.time()
+        r = _finish(procs[1], timeout=60)
+        stop_s = time.time() - killed
+    finally:
+        for p in procs:
+            p.kill()
+            p.communicate()
+    assert r.returncode == distributed.EXIT_PROCESS_LOST, (r.returncode, r.stderr[-3000:])
+    *before, last = r.stderr.strip().splitlines()
+    assert re.fullmatch(
+        r"\[distributed\] process 0 of 2 \(the coordinator, localhost:\d+\) is gone; process 1 "
+        r"stops\. Start all 2 again as before, with --resume where the run has a complete "
+        r"checkpoint",
+        last,
+    ), r.stderr[-3000:]
+    assert not [line for line in before if re.match(r"F\d{4} ", line)], r.stderr[-3000:]
+    assert "stack trace" not in r.stderr and "Traceback" not in r.stderr
+    assert stop_s < 6, stop_s  # measured: 0.2-0.4 s (the probe of the coordinator's port)

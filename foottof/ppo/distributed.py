@@ -17,9 +17,14 @@ When a process dies the others stop (`ProcessLost`, `lost_process_message`, `exi
 README_multihost.md, "When a process dies". From start-up on (`initialize`) each process also
 watches the others' heartbeats of its own (`PeerWatch`): one silent for half the heartbeat
 timeout, or a start-up that not all join within it, ends the others with one line and status
-EXIT_PROCESS_LOST, before JAX's own abort (a stack dump) at the full timeout.
+EXIT_PROCESS_LOST, before JAX's own abort (a stack dump) at the full timeout. When JAX's runtime
+itself gives up (process 0, which holds the coordination service, is gone: JAX aborts the others
+at once), `_on_runtime_error` says so in one line with the same status instead. A process that
+stops on an error of its own (a full disk on the one that hit it) ends the others with it,
+each in one line, none waiting for a barrier: `stop_run`.
 """
 
+import ctypes
 import os
 import socket
 import sys
@@ -170,6 +175,8 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
         daemon=True,
     )
     timer.start()
+    if setup.num_processes > 1:
+        _catch_runtime_errors(setup)
     try:
         jax.distributed.initialize(
             coordinator_address=setup.coordinator_address,
@@ -182,6 +189,7 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
         raise ProcessLost(lost(_first_line(e))) from None
     finally:
         joined.set()
+        _client_callback(None)
     if jax.process_count() != setup.num_processes:
         raise ValueError(
             f"jax.process_count()={jax.process_count()} after initialize, but the setup "
@@ -190,13 +198,118 @@ def initialize(environ: Mapping[str, str] | None = None) -> Setup | None:
     if setup.num_processes > 1:
         from jax._src import distributed as jax_distributed  # the runtime's key-value client
 
-        PeerWatch(
+        global _WATCH
+        _WATCH = PeerWatch(
             jax_distributed.global_state.client,
             setup.process_id,
             setup.num_processes,
             setup.heartbeat_timeout_s / 2,
-        ).start()
+        )
+        _WATCH.start()
     return setup
+
+
+# ------------------------------------------------- when JAX's runtime gives up (the coordinator)
+# JAX ends every process whose coordination client polls an error from the service (process 0
+# gone: its sockets close, and the others' poll fails at once) with its own fatal log and a stack
+# dump (SIGABRT). The client takes a callback for that error instead: `_on_runtime_error`. In
+# jaxlib 0.10.2 the callback is never reached (its absl::Status argument has no Python type:
+# std::bad_cast, so std::terminate), hence the terminate handler, which says the same line when
+# the exception that ends the process is that std::bad_cast, and leaves any other to the C++
+# runtime's own handler (a message, then abort).
+_SETUP: Setup | None = None  # this process's setup, from _catch_runtime_errors on
+_TERMINATE = ctypes.CFUNCTYPE(None)
+_terminate_kept: list = []  # the installed handler and the one before it (kept alive)
+
+
+def _client_callback(callback) -> None:
+    """Makes jax.distributed.initialize create its client with `callback` as the runtime's error
+    callback (None: as JAX does)."""
+    from jax._src.lib import _jax
+
+    real = getattr(_jax.get_distributed_runtime_client, "_foottof_real", None)
+    if callback is None:
+        if real is not None:
+            _jax.get_distributed_runtime_client = real
+        return
+    real = real or _jax.get_distributed_runtime_client
+
+    def client(*args, **kwargs):
+        kwargs.setdefault("missed_heartbeat_callback", callback)
+        return real(*args, **kwargs)
+
+    client._foottof_real = real
+    _jax.get_distributed_runtime_client = client
+
+
+def _catch_runtime_errors(setup: Setup) -> None:
+    """Puts `_on_runtime_error` before JAX's abort (see above); call it before initialize."""
+    global _SETUP
+    _SETUP = setup
+    _client_callback(_on_runtime_error)
+    if _terminate_kept:
+        return
+    try:
+        libstdcxx = ctypes.CDLL("libstdc++.so.6")
+        set_terminate = libstdcxx._ZSt13set_terminatePFvvE  # std::set_terminate
+        current_type = libstdcxx.__cxa_current_exception_type
+    except (OSError, AttributeError):  # another C++ runtime: JAX's abort stays
+        return
+    set_terminate.restype, set_terminate.argtypes = ctypes.c_void_p, [_TERMINATE]
+    current_type.restype = ctypes.c_void_p
+
+    def on_terminate() -> None:
+        info = current_type()  # std::type_info*: [vtable, const char* name]; None: no exception
+        name = info and ctypes.c_char_p.from_address(info + ctypes.sizeof(ctypes.c_void_p)).value
+        if name and name.endswith(b"bad_cast"):
+            _on_runtime_error(None)
+        if previous:
+            _TERMINATE(previous)()  # "terminate called after throwing ...", then abort
+
+    handler = _TERMINATE(on_terminate)
+    previous = set_terminate(handler)
+    _terminate_kept.extend([handler, previous])
+
+
+def _reachable(address: str | None, tries: int = 10, timeout_s: float = 1.0) -> bool:
+    """Whether TCP connections to host:port open, `tries` times 0.2 s apart (a process that is
+    being killed may accept one more)."""
+    host, _, port = (address or "").rpartition(":")
+    for i in range(tries):
+        try:
+            with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
+                pass
+        except (OSError, ValueError):
+            return False
+        time.sleep(0.2)
+    return True
+
+
+def _on_runtime_error(status=None) -> None:
+    """JAX's runtime gave up on this run: one line and EXIT_PROCESS_LOST (a process already
+    stopping with a line of its own, `stop_run`, ends with that)."""
+    if _STOPPING is not None:
+        exit_at_once(*_STOPPING)
+    setup = _SETUP
+    n, me = (setup.num_processes, setup.process_id) if setup else ("all", "this")
+    from jax._src import distributed as jax_distributed
+
+    address = jax_distributed.global_state.coordinator_address
+    if me != 0 and not _reachable(address):
+        what = f"process 0 of {n} (the coordinator, {address}) is gone"
+    else:
+        what = "JAX's coordination service reported a lost process" + (
+            f" ({_first_line(Exception(str(status)))})" if status is not None else ""
+        )
+    exit_at_once(_again(f"[distributed] {what}; process {me} stops", n))
+
+
+def _again(line: str, n) -> str:
+    """`line` and how to go on."""
+    return (
+        f"{line}. Start all {n} again as before, with --resume where the run has a complete "
+        f"checkpoint"
+    )
 
 
 def _first_line(error: BaseException, limit: int = 200) -> str:
@@ -206,6 +319,9 @@ def _first_line(error: BaseException, limit: int = 200) -> str:
 
 BEAT_PREFIX = "foottof/beat/"  # key-value keys of PeerWatch: BEAT_PREFIX + process id
 BEAT_DONE = "done"  # the beat of a process that ended normally: no longer watched
+BEAT_STOP = "stop:"  # the beat of a process that stops the run: BEAT_STOP + its line (stop_run)
+_WATCH: "PeerWatch | None" = None  # this process's watch (initialize, several processes)
+_STOPPING: tuple[str, int] | None = None  # (line, status) of this process once it stops the run
 
 
 class PeerWatch(threading.Thread):
@@ -217,7 +333,9 @@ class PeerWatch(threading.Thread):
     process with one line and EXIT_PROCESS_LOST: during start-up, the first compile, a restore,
     a checkpoint's barriers or the training loop alike (a killed process is usually noticed
     sooner there, by the next collective: ProcessLost). At a normal exit the beat becomes
-    BEAT_DONE (an atexit hook, run before JAX's shutdown), so the others stop watching it.
+    BEAT_DONE (an atexit hook, run before JAX's shutdown), so the others stop watching it. A
+    beat BEAT_STOP + line (a process that stopped the run, `stop_run`) ends this process too,
+    with one line that quotes it.
     """
 
     def __init__(self, client, process_id: int, num_processes: int, silence_s: float):
@@ -225,23 +343,23 @@ class PeerWatch(threading.Thread):
         self.client, self.me, self.n = client, process_id, num_processes
         self.silence_s = float(silence_s)
         self._stop = threading.Event()
+        self._decided = threading.Lock()  # held by the first of stop_run / a peer's stop
 
     def _lost(self, what: str) -> None:
         if not self._stop.is_set():
-            exit_at_once(
-                f"[distributed] {what}; process {self.me} stops. Start all {self.n} again as "
-                f"before, with --resume where the run has a complete checkpoint"
-            )
+            exit_at_once(_again(f"[distributed] {what}; process {self.me} stops", self.n))
+
+    def _beat(self, value: str) -> dict[str, str]:
+        """Sets this process's beat; returns every process's {id: beat}."""
+        self.client.key_value_set(f"{BEAT_PREFIX}{self.me}", value, True)
+        return {k.rsplit("/", 1)[-1]: v for k, v in self.client.key_value_dir_get(BEAT_PREFIX)}
 
     def run(self) -> None:
         seen = {p: (None, time.monotonic()) for p in range(self.n) if p != self.me}
         beat = 0
         while not self._stop.wait(self.silence_s / 10):
             try:
-                self.client.key_value_set(f"{BEAT_PREFIX}{self.me}", str(beat), True)
-                values = {
-                    k.rsplit("/", 1)[-1]: v for k, v in self.client.key_value_dir_get(BEAT_PREFIX)
-                }
+                values = self._beat(str(beat))
             except Exception as e:
                 self._lost(f"process 0 of {self.n} (the coordinator) stopped answering "
                            f"({_first_line(e)})")  # fmt: skip
@@ -250,7 +368,12 @@ class PeerWatch(threading.Thread):
             now = time.monotonic()
             for p, (value, since) in list(seen.items()):
                 new = values.get(str(p))
-                if new == BEAT_DONE:
+                if new is not None and new.startswith(BEAT_STOP):
+                    why = f"process {p} of {self.n} did: {new[len(BEAT_STOP) :]}"
+                    self.stop_run(
+                        f"[distributed] process {self.me} stops because {why}", EXIT_PROCESS_LOST
+                    )
+                elif new == BEAT_DONE:
                     del seen[p]
                 elif new != value:
                     seen[p] = (new, now)
@@ -260,6 +383,26 @@ class PeerWatch(threading.Thread):
                         f"(killed, hung or its host gone)"
                     )
                     return
+
+    def stop_run(self, message: str, status: int) -> NoReturn:
+        """Ends this process with `message`, once the others have read it (see stop_run)."""
+        global _STOPPING
+        if not self._decided.acquire(blocking=False):  # the other thread ends the process
+            threading.Event().wait()
+        _STOPPING = (message, status)  # also the line if JAX's runtime gives up meanwhile
+        self._stop.set()
+        deadline = time.monotonic() + self.silence_s
+        others = [str(p) for p in range(self.n) if p != self.me]
+        while time.monotonic() < deadline:
+            try:
+                values = self._beat(BEAT_STOP + message)
+            except Exception:  # the store is gone with process 0: no one is left to tell
+                break
+            if all(values.get(p, "").startswith(BEAT_STOP) or values.get(p) == BEAT_DONE
+                   for p in others):  # fmt: skip
+                break
+            time.sleep(min(0.1, self.silence_s / 10))
+        exit_at_once(message, status)
 
     def start(self) -> None:
         import atexit
@@ -276,6 +419,19 @@ class PeerWatch(threading.Thread):
             self.client.key_value_set(f"{BEAT_PREFIX}{self.me}", BEAT_DONE, True)
         except Exception:  # the runtime is gone already: nothing to tell
             pass
+
+
+def stop_run(message: str) -> NoReturn:
+    """Ends this process on an error of its own (`message`: one line on stderr, status 1), and
+    with it the run: in a run of several processes each other one stops with one line that
+    quotes `message` and EXIT_PROCESS_LOST, wherever it waits (a collective, one of orbax's
+    barriers). Its beat says so (BEAT_STOP); this process ends at once (`exit_at_once`, no
+    barrier of JAX's shutdown) when every other process has read it, or after half the
+    heartbeat timeout. One process: sys.exit(message).
+    """
+    if _WATCH is None:
+        sys.exit(message)
+    _WATCH.stop_run(message, 1)
 
 
 def check_num_envs(
@@ -369,10 +525,15 @@ def exit_at_once(message: str, status: int = EXIT_PROCESS_LOST) -> NoReturn:
     one too, until the heartbeat timeout, and then aborts with a page of C++ log; orbax's and
     TensorBoard's exit handlers have nothing left to write (checkpoints are synchronous).
     """
+    if not _EXITING.acquire(blocking=False):  # another thread is ending the process
+        threading.Event().wait()
     sys.stdout.flush()
     sys.stderr.write(message + "\n")
     sys.stderr.flush()
     os._exit(status)
+
+
+_EXITING = threading.Lock()  # taken by the one exit_at_once that ends the process
 
 
 def local_cpu_environ(devices: int = 1, **extra: str) -> dict:

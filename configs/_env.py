@@ -70,6 +70,8 @@ def _add_task_fields(e: ml_collections.ConfigDict) -> ml_collections.ConfigDict:
     e.actor_terrain = False  # teacher: the actor also reads true foot patches + a 0.6 m scan
     # teacher: those terrain inputs only where a foot ToF ray has hit this episode, + seen flags
     e.actor_terrain_seen = False
+    # teacher: also the points between those 10 cm samples, 5 cm apart (foottof.envs.fine_terrain)
+    e.actor_terrain_fine = False
     e.critic_height_scan = False  # critic also sees 171 terrain heights around/ahead of the base
     e.max_tilt_deg = 60.0  # base tilt beyond this terminates [deg]
     e.init_joint_noise_rad = 0.05  # initial joint angles ~ default + U(+-this) [rad]

@@ -232,6 +232,7 @@ RULES = {
     "env.critic_height_scan": _bool,
     "env.actor_terrain": _bool,
     "env.actor_terrain_seen": _bool,
+    "env.actor_terrain_fine": _bool,
     "env.max_tilt_deg": _num(0.0, 180.0, lo_open=True),
     "env.init_joint_noise_rad": _nonneg,
     "env.init_roll_pitch_rad": _num(0.0, math.pi / 2),
@@ -564,6 +565,15 @@ def _check_cross(c) -> None:
             "env.actor_terrain_seen",
             True,
             "needs env.actor_terrain=True (it limits the teacher's terrain inputs to the seen cells)",
+        )
+    if e.get("actor_terrain_fine", False) and (
+        not e.get("actor_terrain", False) or e.get("actor_terrain_seen", False)
+    ):
+        _fail(
+            "env.actor_terrain_fine",
+            True,
+            "needs env.actor_terrain=True and env.actor_terrain_seen=False (it adds 5 cm samples "
+            "between the teacher's true 10 cm ones)",
         )
     s = c.sensor
     n_sensors = len(s.sites)

@@ -38,6 +38,7 @@ ADDED_FIELDS = {
     "train.teacher_change_ok": False,  # a resumed student keeps the teacher it started with
     "env.actor_terrain": False,  # off: the actor reads its sensors only (no teacher inputs)
     "env.actor_terrain_seen": False,  # a teacher's terrain inputs are true everywhere
+    "env.actor_terrain_fine": False,  # a teacher's terrain inputs are 10 cm apart only
     "env.critic_height_scan": False,  # off: the critic reads no base-centred height scan
     "env.foot_stuck_depth_m": 0.0,  # off: a foot in a gap does not end the episode
     "terrain.no_promotion_on_fall": False,  # a failed episode may still be promoted

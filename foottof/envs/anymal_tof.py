@@ -12,6 +12,7 @@ from brax.envs.base import Env, State
 from flax import struct
 
 from foottof import constants
+from foottof.envs import fine_terrain
 from foottof.envs import observations as obs_lib
 from foottof.envs import rewards as rw
 from foottof.envs import sensing, symmetry
@@ -667,6 +668,11 @@ class AnymalToFEnv(Env):
         if self.spec.actor_terrain:  # static: a teacher's actor also sees the terrain, true
             terrain = self._actor_terrain(seen, fk, patches, scan, qpos[0:3], base_quat)
             state_obs = jp.concatenate([state_obs, terrain])
+        if self.spec.actor_terrain_fine:  # static: and 5 cm apart in between (372)
+            fine = fine_terrain.fine_terrain(
+                self.hfield.height_at, fk.foot_pos, qpos[0:3], base_quat
+            )
+            state_obs = jp.concatenate([state_obs, fine])
         lim = self.spec.clip_observations
         return {
             "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),

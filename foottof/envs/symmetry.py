@@ -239,7 +239,8 @@ class Mirror:
 
 def make_mirror(cfg) -> Mirror:
     """The mirror of the ToF env built from ``cfg`` (its sensor section, env.actor_terrain,
-    env.actor_terrain_seen, env.critic_height_scan): obs keys 'state' and 'privileged_state'.
+    env.actor_terrain_seen, env.actor_terrain_fine, env.critic_height_scan): obs keys 'state'
+    and 'privileged_state'.
 
     Raises:
       ValueError: sensors without a mirror partner (see :func:`sensor_perm`).
@@ -253,5 +254,9 @@ def make_mirror(cfg) -> Mirror:
     actor = actor_map(perm, spec.grid)
     if read_added(env, "env.actor_terrain"):
         actor = concat(actor, actor_terrain_map(bool(read_added(env, "env.actor_terrain_seen"))))
+    if read_added(env, "env.actor_terrain_fine"):
+        from foottof.envs import fine_terrain
+
+        actor = concat(actor, SignedPerm(*fine_terrain.mirror_perm()))
     critic = critic_map(perm, spec.grid, bool(read_added(env, "env.critic_height_scan")))
     return Mirror(obs={"state": actor, "privileged_state": critic}, action=ACTION)

@@ -39,6 +39,7 @@ class TaskSpec:
     critic_height_scan: bool
     actor_terrain: bool
     actor_terrain_seen: bool  # the teacher's terrain only where a foot ray has hit (+ flags)
+    actor_terrain_fine: bool  # the teacher's terrain also 5 cm apart (envs.fine_terrain)
     steps_per_iteration: int  # control steps each env takes per training iteration
     reward: RewardSpec  # the reward section (terms, scales, success radius, guidance decay)
     randomization: RandomizationSpec  # the env.randomization section
@@ -71,6 +72,7 @@ class TaskSpec:
             critic_height_scan=bool(read_added(e, "env.critic_height_scan")),
             actor_terrain=bool(read_added(e, "env.actor_terrain")),
             actor_terrain_seen=bool(read_added(e, "env.actor_terrain_seen")),
+            actor_terrain_fine=bool(read_added(e, "env.actor_terrain_fine")),
             steps_per_iteration=int(cfg.ppo.num_steps),
             reward=RewardSpec.from_config(cfg.reward),
             randomization=RandomizationSpec.from_config(e.randomization),

@@ -58,7 +58,7 @@ _NOT_DRAW_EVAL_KEYS = (
 )
 # Env fields that change what the actor reads and no draw: a teacher (env.actor_terrain) and its
 # ToF student run the same episodes, so their evaluations pair.
-_NOT_DRAW_ENV_KEYS = ("actor_terrain", "actor_terrain_seen")
+_NOT_DRAW_ENV_KEYS = ("actor_terrain", "actor_terrain_seen", "actor_terrain_fine")
 
 
 def wilson_interval(successes: int, n: int, z: float = 1.959964) -> tuple[float, float]:

@@ -368,6 +368,12 @@ def _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_p
         except BaseException:
             checkpointer.close()
             raise
+        if renames.read_added(cfg.get("env", {}), "env.actor_terrain_fine"):
+            from foottof.envs import fine_terrain
+
+            normalizer, seeded = fine_terrain.seed_normalizer(normalizer)
+            if seeded:
+                print("[runner] the 5 cm terrain inputs' statistics start as their 10 cm sample's")
         state = state.replace(params=params, normalizer=normalizer)
         print(f"[runner] params and normalizer initialized from {init_from}")
     elif init_params is not None:

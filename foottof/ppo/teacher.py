@@ -67,6 +67,12 @@ def teacher_sees_only_seen(path: str) -> bool:
     return bool(read_added(env, "env.actor_terrain_seen"))
 
 
+def teacher_reads_fine(path: str) -> bool:
+    """The teacher's env.actor_terrain_fine, from its run config (False where it has none)."""
+    env = _saved_run_config(path).get("env", {})
+    return bool(read_added(env, "env.actor_terrain_fine"))
+
+
 def _saved_run_config(path: str) -> dict:
     """The run config (config.json beside or above ``path``) as a dict; {} where it has none."""
     from foottof.ppo import run_dir as run_dirs
@@ -159,11 +165,14 @@ def check_teacher_path(path: str) -> None:
         )
 
 
-def student_view_size(teacher_obs_size: int, privileged_inputs: int = 0, seen: bool = False) -> int:
+def student_view_size(
+    teacher_obs_size: int, privileged_inputs: int = 0, seen: bool = False, fine: bool = False
+) -> int:
     """How many of the teacher's actor inputs a ToF student reads: its own (the teacher's minus
     the terrain inputs env.actor_terrain appends: 153, or 306 with env.actor_terrain_seen =
-    ``seen``) and the first ``privileged_inputs`` of those (train.student_privileged_inputs, a
-    diagnostic: 36 = the foot patches).
+    ``seen``, and 372 more with env.actor_terrain_fine = ``fine``) and the first
+    ``privileged_inputs`` of those (train.student_privileged_inputs, a diagnostic: 36 = the foot
+    patches).
 
     Raises:
       ValueError: naming the value and its range, when ``privileged_inputs`` is outside
@@ -177,7 +186,10 @@ def student_view_size(teacher_obs_size: int, privileged_inputs: int = 0, seen: b
             f"[0, {ACTOR_TERRAIN_INPUTS}] (the teacher's terrain inputs: 36 foot patches, then "
             f"the base scan)"
         )
-    return int(teacher_obs_size) - actor_terrain_size(seen) + int(privileged_inputs)
+    from foottof.envs.fine_terrain import NUM_INPUTS as fine_inputs
+
+    terrain = actor_terrain_size(seen) + (fine_inputs if fine else 0)
+    return int(teacher_obs_size) - terrain + int(privileged_inputs)
 
 
 def make_distill_env(cfg):
@@ -197,11 +209,12 @@ def make_distill_env(cfg):
             "env.actor_terrain=True in a distillation config: the config is the student's "
             "(sensors only); the teacher's terrain inputs are added for it"
         )
-    seen = teacher_sees_only_seen(path)
+    seen, fine = teacher_sees_only_seen(path), teacher_reads_fine(path)
     full = cfg.copy_and_resolve_references()
     with full.unlocked():
         full.env.actor_terrain = True
         full.env.actor_terrain_seen = seen  # as the teacher was trained
+        full.env.actor_terrain_fine = fine
     env = make_training_env(full)
     teacher = load_teacher(path, env, teacher_network_cfg(path, cfg.network))
     shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
@@ -209,6 +222,7 @@ def make_distill_env(cfg):
         shape.obs[net.ACTOR_KEY].shape[-1],
         read_added(cfg.train, "train.student_privileged_inputs"),
         seen,
+        fine,
     )
     _, t_params, t_norm = teacher
 

@@ -10,7 +10,8 @@ python tests/multidevice_worker.py MODE OUT.
                           1), after foottof.ppo.distributed.initialize() (with JAX_* variables:
                           one of several processes); process 0 writes OUT_DIR/final.npz (params,
                           opt_state, normalizer); another process lost: train.py's one line and
-                          exit status
+                          exit status; FOOTTOF_TEST_DISK_FULL=P:N: process P finds the disk full
+                          while saving checkpoint N (train.py's one line and exit status)
   collectives             all-gathers over all processes until stopped (with JAX_* variables)
   stall                   starts the runtime as train.py does, then waits (a long first compile)
 """
@@ -100,6 +101,28 @@ def update(out: str) -> None:
     np.savez(out, **arrays)
 
 
+DISK_FULL_VAR = "FOOTTOF_TEST_DISK_FULL"  # "P:N": process P finds the disk full at checkpoint N
+
+
+def _disk_full_at(step: int) -> None:
+    """This process's array writes into checkpoint `step` fail as TensorStore fails on a full
+    disk (what orbax 0.12.8 raised on a 4 MB tmpfs); its other writes and other processes'
+    succeed."""
+    from orbax.checkpoint._src.serialization import serialization
+
+    real = serialization.async_serialize_from_host
+
+    async def write(rslices, spec, *args, **kwargs):
+        if f"/{step}.orbax-checkpoint-tmp" in str(spec):
+            raise ValueError(
+                f"RESOURCE_EXHAUSTED: Error writing local file in checkpoint {step}: Failed to "
+                "write 1231 bytes to file 41: No space left on device [os_error_code='28']"
+            )
+        return await real(rslices, spec, *args, **kwargs)
+
+    serialization.async_serialize_from_host = write
+
+
 def run(out_dir: str, iterations: str = "3", every: str = "1", resume: bool = False) -> None:
     from foottof.ppo import distributed  # imports no JAX
 
@@ -108,11 +131,18 @@ def run(out_dir: str, iterations: str = "3", every: str = "1", resume: bool = Fa
     import numpy as np
     from helpers import tiny_cfg
 
+    from foottof import files
     from foottof.ppo import runner, toy_envs
 
+    if full := os.environ.get(DISK_FULL_VAR):
+        process, step = full.split(":")
+        if int(process) == jax.process_index():
+            _disk_full_at(int(step))
     cfg = tiny_cfg(num_iterations=int(iterations), checkpoint_every=int(every), tensorboard=False)
     try:
         state = runner.run(cfg, toy_envs.make_memory_env(), out_dir, resume=resume)
+    except files.DiskFull as e:  # as train.py
+        distributed.stop_run(f"error: {e}")
     except distributed.ProcessLost as e:  # as train.py
         distributed.exit_at_once(str(e))
     print(

@@ -580,3 +580,103 @@ def test_the_coordinator_lost_during_the_first_compile_stops_the_others_in_one_l
     assert not [line for line in before if re.match(r"F\d{4} ", line)], r.stderr[-3000:]
     assert "stack trace" not in r.stderr and "Traceback" not in r.stderr
     assert stop_s < 6, stop_s  # measured: 0.2-0.4 s (the probe of the coordinator's port)
+
+
+# ------------------------------------------------------------- a full disk, several processes
+@pytest.fixture(scope="module")
+def one_process_six(tmp_path_factory):
+    """1 process x 2 devices, 6 iterations, a checkpoint every 2: what 2 processes x 1 device
+    give bit for bit (test_two_processes_equal_two_devices_and_resume)."""
+    one = tmp_path_factory.mktemp("one_process")
+    _ok(
+        subprocess.run(
+            [sys.executable, WORKER, "run", str(one), "6", "2"],
+            cwd=ROOT,
+            env=_env(devices=2),
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+    )
+    return one
+
+
+def _until_both_end(procs: list[subprocess.Popen], timeout: float, then_s: float) -> float:
+    """Waits for the first of `procs` to end (at most `timeout` s), then `then_s` s for the
+    other; returns the seconds between the two ends (the other is killed past then_s)."""
+    deadline, first = time.time() + timeout, None
+    while any(p.poll() is None for p in procs):
+        now = time.time()
+        if first is None and any(p.poll() is not None for p in procs):
+            first = now
+        if now > (deadline if first is None else first + then_s):
+            break
+        time.sleep(0.05)
+    return time.time() - (first or time.time())
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("full", [1, 0])
+def test_disk_full_on_one_process_stops_every_process_in_one_line_and_resumes(
+    tmp_path, request, full
+):  # ~6 min on the busy 2-core box (3 min each way)
+    """2 processes x 1 device, a checkpoint every 2 iterations. Each process writes its own
+    shards of a checkpoint (process 0 also the replicated arrays and the metadata); here process
+    `full` finds the disk full while writing checkpoint 4 (ENOSPC as TensorStore reports it),
+    the other does not and waits for it in one of orbax's barriers. The process that hit it
+    stops with train.py's one line (the run, the space needed, checkpoint 2 as the last
+    complete one), status 1; the other, within seconds, with one line that quotes it and
+    EXIT_PROCESS_LOST; not JAX's abort, nor a wait at a barrier until a timeout. Checkpoint 2 is
+    intact, no checkpoint 4 is complete, metrics.csv has whole rows; 2 new processes with
+    --resume continue from 2 to 6 bit-exactly (metrics but the wall clock, params, Adam state,
+    normalizer as the 1-process run)."""
+    from foottof.ppo import integrity
+    from foottof.ppo import run_dir as run_dirs
+
+    run = tmp_path / "run"
+    cmd = [sys.executable, WORKER, "run", str(run), "6", "2"]
+    procs = _start(cmd, 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="10", FOOTTOF_TEST_DISK_FULL=f"{full}:4")
+    try:
+        apart_s = _until_both_end(procs, timeout=600, then_s=30)
+    finally:
+        for p in procs:
+            p.kill()
+        results = [_finish(p, 30) for p in procs]
+    hit, other = results[full], results[1 - full]
+    line = hit.stderr.strip().splitlines()[-1]
+    assert hit.returncode == 1, (hit.returncode, hit.stderr[-3000:])
+    at = re.escape(str(run))
+    assert re.fullmatch(
+        rf"error: disk full in {at} while saving checkpoint 4: it needs about \S+ [kM]B free, "
+        rf"\S+ [kM]B is; checkpoint 2 is the last complete one\. Free space there, then continue "
+        rf"from it \(train\.py --resume --run_dir {at}\)",
+        line,
+    ), hit.stderr[-3000:]
+    assert other.returncode == distributed.EXIT_PROCESS_LOST, (
+        other.returncode,
+        other.stderr[-3000:],
+    )
+    assert other.stderr.strip().splitlines()[-1] == (
+        f"[distributed] process {1 - full} stops because process {full} of 2 did: {line}"
+    ), other.stderr[-3000:]
+    for r in results:  # one line of ours each (orbax logs the failed write before it)
+        ours = [x for x in r.stderr.splitlines() if x.startswith(("error:", "[distributed]"))]
+        assert len(ours) == 1 and "stack trace" not in r.stderr, r.stderr[-3000:]
+    assert apart_s < 15, apart_s  # measured: under 1 s (the watch reads every 0.5 s here)
+    assert run_dirs.latest_checkpoint(str(run)) == 2
+    assert integrity.integrity_problem(str(run / "checkpoints" / "2")) is None
+    rows = _metrics(run)
+    assert [r["iteration"] for r in rows][:2] == ["1", "2"] and len(rows) <= 4
+    assert all(None not in r and "" not in r.values() for r in rows)  # none torn
+
+    results = _processes([sys.executable, WORKER, "resume", str(run), "6", "2"], 2, 600)
+    for r in results:
+        _ok(r)
+    assert "[runner] resumed from iteration 2 in" in results[0].stdout
+    one_process_six = request.getfixturevalue("one_process_six")  # after the stop: fails sooner
+    assert _metrics(run) == _metrics(one_process_six)
+    a, b = np.load(one_process_six / "final.npz"), np.load(run / "final.npz")
+    assert sorted(a) == sorted(b) and len(a) > 50
+    assert all(np.array_equal(a[k], b[k]) for k in a), [
+        k for k in a if not np.array_equal(a[k], b[k])
+    ]

@@ -275,7 +275,7 @@ def _reachable(address: str | None, tries: int = 10, timeout_s: float = 1.0) -> 
     """Whether TCP connections to host:port open, `tries` times 0.2 s apart (a process that is
     being killed may accept one more)."""
     host, _, port = (address or "").rpartition(":")
-    for i in range(tries):
+    for _ in range(tries):
         try:
             with socket.create_connection((host.strip("[]"), int(port)), timeout=timeout_s):
                 pass

@@ -59,7 +59,7 @@ def _cell_store(cfg, out: str, ckpt: str | None, draws: dict):
     interrupted command loads the cells it already finished."""
     from foottof.eval import results
     from foottof.eval.cells import CellStore, cell_identity
-    from foottof.ppo.integrity import policy_digest
+    from foottof.ppo.storage.integrity import policy_digest
 
     policy = policy_digest(ckpt) if ckpt else "untrained"
     cap = results.action_std_cap(cfg)
@@ -81,7 +81,7 @@ def main(argv):
     from foottof.eval import modes, results
     from foottof.eval import robustness as rb
     from foottof.perception import check_source
-    from foottof.ppo.run_dir import (
+    from foottof.ppo.storage.run_dir import (
         resolve_checkpoint,
         run_config_path,
         with_run_curriculum,

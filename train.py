@@ -35,7 +35,7 @@ def main(argv):
     logging.set_verbosity(logging.WARNING)  # orbax logs every checkpoint write at INFO
     from foottof import config_check, files
     from foottof.ppo import distributed
-    from foottof.ppo import run_dir as run_dirs
+    from foottof.ppo.storage import run_dir as run_dirs
 
     cfg = _CONFIG.value
     t = cfg.train
@@ -82,7 +82,7 @@ def main(argv):
     print(f"[train] {what} in {run_dir}" + (f" ({latest} links to it)" if latest else ""))
     from foottof.envs import make_training_env
     from foottof.ppo import runner
-    from foottof.ppo.checkpoint import CheckpointUnreadable
+    from foottof.ppo.storage.checkpoint import CheckpointUnreadable
 
     try:
         init_params = None

@@ -2,8 +2,8 @@
 
 Differs from stage1.py in: the CPU network of cpu.py / flat.py (LSTM 64, heads (128, 64)) so that
 it starts from the shipped flat policy (policies/flat; the critic's new height-scan inputs start
-with zero weights, see foottof/ppo/checkpoint.py), 512 envs x 40-step rollouts (20,480 samples per
-update; the truncated-backprop window of 0.8 s covers the ~0.6-0.75 s between what a front-foot
+with zero weights, see foottof/ppo/storage/checkpoint.py), 512 envs x 40-step rollouts (20,480
+samples per update; the truncated-backprop window of 0.8 s covers the ~0.6-0.75 s between what a front-foot
 sensor sees and where a hind foot lands), a 10 x 10 map whose columns follow the evaluation
 ensemble's types (grid 3, two-row 2, mixed-row 3, platform gap 2; no boxes: they are not in the
 ensemble), checkpoints every 10 iterations (a few minutes on 2 cores), a long run meant to be

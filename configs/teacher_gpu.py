@@ -17,8 +17,8 @@ covers the time from what a front foot's sensor sees to where a hind foot lands,
 configs/stage1_cpu.py), so a minibatch holds 40,960 samples (the anchors: 24,576); 4 minibatches;
 the 10 x 10 map whose columns follow the evaluation ensemble; and the network (LSTM 64, obs_skip,
 actor 512-256, critic 128-64): init_from restores the saved layers, a wider actor head at most
-(foottof.ppo.input_growth), so the anchors' third layer or wider critic would not start as the
-saved policy, and the CPU run can take this run's parameters back.
+(foottof.ppo.storage.input_growth), so the anchors' third layer or wider critic would not start as
+the saved policy, and the CPU run can take this run's parameters back.
 """
 
 from configs import teacher_cpu

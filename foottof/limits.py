@@ -12,8 +12,12 @@ ACTIVATIONS = ("elu", "relu", "tanh", "silu")
 # about each site axis below this [deg].
 TOF_MAX_RATE_HZ = {4: 60.0, 8: 15.0}
 TILT_LIMIT_DEG = 90.0
-# Terrain (foottof.terrain.tiles): heightfield vertex spacing bound [m].
+# Terrain (foottof.terrain.tiles): heightfield vertex spacing bound [m]; the stepping-stone tile
+# types; the difficulty fraction from which every stone curriculum holds the same values (the
+# evaluation ensemble's knot; foottof.eval.results reads both for its draws fingerprint).
 MAX_CELL_M = 0.04
+STONE_TYPES = ("grid_stones", "two_row_stones", "mixed_row_stones")
+ENSEMBLE_KNOT = 0.72
 # Robot (foottof.robot.model; the tiles draw cracks for the same foot): foot sphere radius [m].
 FOOT_RADIUS_RANGE_M = (0.02, 0.05)
 # Evaluation (foottof.eval.robustness): valid closed range of each perturbation's levels; the

@@ -24,9 +24,9 @@ import numpy as np  # noqa: E402
 from configs import distill_cpu  # noqa: E402
 from foottof.constants import FEET  # noqa: E402
 from foottof.envs.observations import FOOT_PATCH_OFFSETS_M  # noqa: E402
-from foottof.ppo import checkpoint as ckpt  # noqa: E402
 from foottof.ppo import distill, teacher  # noqa: E402
 from foottof.ppo import networks as net  # noqa: E402
+from foottof.ppo.storage import checkpoint as ckpt  # noqa: E402
 
 WARMUP = 20  # steps left out at the start (the memory is empty)
 

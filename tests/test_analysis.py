@@ -265,7 +265,7 @@ def test_the_demo_episode_crosses_stones_to_the_goal():
     import re
 
     from configs import load_config
-    from foottof.ppo import run_dir
+    from foottof.ppo.storage import run_dir
     from foottof.terrain import TERRAIN_TYPES
 
     repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))

@@ -11,8 +11,8 @@ from helpers import REPO, hfield_mj_model
 
 from configs import flat
 from foottof.envs.observations import critic_height_scan, critic_scan_points
-from foottof.ppo import checkpoint as ckpt
 from foottof.ppo.networks import make_networks
+from foottof.ppo.storage import checkpoint as ckpt
 from foottof.terrain import Heightfield
 
 FLAT_POLICY = os.path.join(REPO, "policies", "flat")

@@ -10,7 +10,7 @@ from configs import smoke, teacher_cpu
 from foottof import constants
 from foottof.envs import make_env
 from foottof.envs import rewards as rw
-from foottof.envs.anymal_tof import FAIL_REASONS
+from foottof.envs.terminations import FAIL_REASONS
 from foottof.terrain import TERRAIN_TYPES
 
 NUM_ENVS = len(TERRAIN_TYPES)  # one env per column: every terrain type is covered

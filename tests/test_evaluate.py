@@ -20,7 +20,7 @@ from configs import smoke
 from foottof.eval import cells, harness, paired, plots, results
 from foottof.eval import robustness as rb
 from foottof.perception import check_source
-from foottof.ppo import run_dir
+from foottof.ppo.storage import run_dir
 
 
 def tiny_cfg():
@@ -739,7 +739,7 @@ def test_cell_store_reuses_only_an_intact_cell_of_the_same_identity(tmp_path):
 
 
 def test_policy_digest_follows_the_policy_files(tmp_path):
-    from foottof.ppo.integrity import policy_digest
+    from foottof.ppo.storage.integrity import policy_digest
 
     run = tmp_path / "run"
     for step, value in ((10, b"a"), (20, b"b")):
@@ -763,7 +763,7 @@ def test_policy_digest_follows_the_policy_files(tmp_path):
 
 
 def _save_checkpoint(run_dir, params, normalizer):
-    from foottof.ppo.checkpoint import Checkpointer
+    from foottof.ppo.storage.checkpoint import Checkpointer
     from foottof.ppo.train import TrainState
 
     z = jp.zeros(1)

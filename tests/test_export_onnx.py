@@ -10,10 +10,10 @@ import pytest
 from helpers import REPO, run_cli
 
 from configs import flat
-from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import export
 from foottof.ppo.networks import make_networks
-from foottof.ppo.run_dir import with_run_network
+from foottof.ppo.storage import checkpoint as ckpt
+from foottof.ppo.storage.run_dir import with_run_network
 
 onnx = pytest.importorskip("onnx")
 ort = pytest.importorskip("onnxruntime")

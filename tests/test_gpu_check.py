@@ -99,7 +99,7 @@ def dry_run(tmp_path_factory):
 def test_dry_run_times_each_step_trains_the_teacher_and_hands_back_its_checkpoint(dry_run):
     """The whole check on the CPU at 32 envs: one table, every step ok, the teacher's
     metrics.csv and a checkpoint that passes its SHA-256 record, in --out."""
-    from foottof.ppo.integrity import integrity_problem
+    from foottof.ppo.storage.integrity import integrity_problem
 
     r, work = dry_run
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
@@ -163,9 +163,9 @@ def test_gpu_pipeline_config_starts_from_the_shipped_policy_and_lowers(name, sta
     config is compiled in the dry run above), and their training iteration traces and lowers to
     XLA. Not compiled: XLA's CPU compile of it takes about a minute, and a GPU compiles its own."""
     from foottof.envs import make_training_env
-    from foottof.ppo import checkpoint as ckpt
     from foottof.ppo import teacher
     from foottof.ppo import train as train_lib
+    from foottof.ppo.storage import checkpoint as ckpt
 
     cfg = _small(load_config(os.path.join(REPO, "configs", f"{name}.py")))
     if cfg.train.teacher:  # loads the teacher: its network must read this env's observation

@@ -13,10 +13,10 @@ from brax.envs.base import State
 from helpers import small_cfg, tiny_cfg, tree_equal
 
 from configs import _ppo
-from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import export, losses, runner, toy_envs
 from foottof.ppo import networks as net
 from foottof.ppo import train as train_lib
+from foottof.ppo.storage import checkpoint as ckpt
 
 
 def train_history(env, cfg, iterations: int):

@@ -123,8 +123,8 @@ def test_shipped_policies_fit_this_code_for_resume(policy, config):
     import jax
 
     from foottof.envs import make_training_env
-    from foottof.ppo import checkpoint as ckpt
     from foottof.ppo import train as train_lib
+    from foottof.ppo.storage import checkpoint as ckpt
 
     run = Path(REPO) / "policies" / policy
     cfg = load_config(str(Path(REPO) / "configs" / config))

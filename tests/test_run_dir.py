@@ -1,11 +1,11 @@
-"""foottof.ppo.run_dir: a new folder per train.py run, the latest linked; errors name CLI flags."""
+"""foottof.ppo.storage.run_dir: a new folder per run, the latest linked; errors name CLI flags."""
 
 import json
 import os
 
 import pytest
 
-from foottof.ppo import run_dir as rd
+from foottof.ppo.storage import run_dir as rd
 
 
 def _fake_run(path, step=10):

@@ -8,7 +8,7 @@ import pytest
 from helpers import REPO
 
 from foottof.lab import ship as ship_lib
-from foottof.ppo.integrity import integrity_problem, policy_digest
+from foottof.ppo.storage.integrity import integrity_problem, policy_digest
 
 SHIPPED = os.path.join(REPO, "policies", "stage1")
 

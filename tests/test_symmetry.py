@@ -15,10 +15,10 @@ from configs import smoke
 from foottof.envs import make_training_env
 from foottof.envs import observations as obs_lib
 from foottof.envs import symmetry as sym
-from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import distill, losses, toy_envs
 from foottof.ppo import symmetry as ppo_sym
 from foottof.ppo import train as train_lib
+from foottof.ppo.storage import checkpoint as ckpt
 from foottof.robot import model as robot_model
 from foottof.terrain.heightfield import Heightfield
 from foottof.terrain.terrain_map import TerrainMap, TerrainMapSpec

@@ -2,36 +2,27 @@
 
 from __future__ import annotations
 
-import functools
-import math
-from typing import NamedTuple
-
 import jax
 import jax.numpy as jp
 from brax.envs.base import Env, State
 from flax import struct
 
 from foottof import constants
-from foottof.envs import fine_terrain
-from foottof.envs import observations as obs_lib
 from foottof.envs import rewards as rw
 from foottof.envs import sensing, symmetry
+from foottof.envs import terminations as term
+from foottof.envs.observe import Observer
 from foottof.envs.randomization import EpisodeParams, sample_episode_params
 from foottof.envs.seen_map import SeenGrid
 from foottof.envs.sensing import select_where
-from foottof.envs.stuck_probe import foot_stuck
+from foottof.envs.step_kinematics import StepKinematics, foot_kinematics, step_kinematics
 from foottof.envs.task_spec import TaskSpec
+from foottof.envs.terminations import Ends
 from foottof.perception import check_source
-from foottof.perception.odometry import noisy_odometry
 from foottof.physics import make_physics
 from foottof.renames import read_added
 from foottof.robot import kinematics
-from foottof.robot.model import (
-    BASE_SPHERE_CENTRES_M,
-    BASE_SPHERE_RADIUS_M,
-    KNEE_SPHERE_RADIUS_M,
-    make_model,
-)
+from foottof.robot.model import make_model
 from foottof.terrain import curriculum
 from foottof.terrain.terrain_map import (
     TerrainMap,
@@ -54,32 +45,7 @@ STEP_METRICS = ("task/speed_mps", "task/feet_at_edges", "task/guidance_weight")
 # State.info key of each env's control steps since training began (only where the guidance bias
 # decays, reward.guidance_decay_end_iteration > 0); checkpointed with the env state.
 ENV_STEPS_KEY = "env_steps"
-# Why an episode failed (AnymalToF.fail_reasons; any of them ends it, and so does divergence):
-# the base (or a knee, with env.knee_contact_terminates) touches the terrain, the base fell below
-# the pit floor + env.fall_height_above_floor_m, a foot went below env.foot_fall_z_m, a foot is
-# stuck in a gap (env.foot_stuck_depth_m), the base tilted beyond env.max_tilt_deg.
-FAIL_REASONS = ("body_contact", "fell", "foot_deep", "foot_stuck", "flipped")
 SEEN_KEY = "seen"  # State.info: (origin, grid) of the ray-hit cells (env.actor_terrain_seen)
-
-
-class StepKinematics(NamedTuple):
-    """What the terminations and rewards read of the state after the physics step."""
-
-    fk: kinematics.FootKinematics
-    foot_vel: jax.Array  # (4, 3) world foot-centre velocities [m/s]
-    contact: jax.Array  # (4,) float 1 where a foot is within the contact margin
-    gravity: jax.Array  # (3,) projected gravity (base frame)
-    foot_edge: jax.Array  # (4,) feet touching the terrain at a height step
-
-
-class Ends(NamedTuple):
-    """How the step ended the episode, if it did."""
-
-    failed: jax.Array  # () bool: failure termination (incl. divergence)
-    truncated: jax.Array  # () bool: the deadline, without failure
-    done: jax.Array  # () bool
-    knee_contact: jax.Array  # (4,) float
-    stuck: jax.Array  # () bool: a foot went into a gap (its own reason, part of failed)
 
 
 @struct.dataclass
@@ -168,6 +134,16 @@ class AnymalToFEnv(Env):
             ahead_m=float(cfg.terrain.tile_length_m) + 1.0,
             half_width_m=float(cfg.terrain.tile_width_m) / 2.0,
         )
+        self.observer = Observer(
+            self.spec,
+            self.hfield,
+            self.seen_grid,
+            self._default_q,
+            self.shank_scale,
+            self.foot_radius_m,
+            self._stand_height,
+            self.episode_steps,
+        )
         self._obs_sizes = None
 
     # ----------------------------------------------------------------------------------------
@@ -241,14 +217,14 @@ class AnymalToFEnv(Env):
         next_d, next_task = self._auto_reset(key_reset, d, task, action, step, success, ends, rng)
         # Sensing on the selected pose: one ray cast per step; buffers restart where done.
         key_meas, key_sense = jax.random.split(key_obs)
-        meas = self._measure(key_meas, next_d, next_task.params)
+        meas = sensing.measure(key_meas, next_d, next_task.params)
         done = ends.done
         sensor_state, sense = self.sensing.step(state.info["sensor"], key_sense, next_d, meas, done)
         seen = None
         if self.spec.actor_terrain_seen:  # static: a fresh grid where done, then this step's rays
             seen = select_where(done, self._fresh_seen(next_task), state.info[SEEN_KEY])
             seen = self._mark_seen(seen, sense)
-        obs = self._observe(next_d, next_task, sense, meas, seen)
+        obs = self.observer(next_d, next_task, sense, meas, seen)
         speed = jp.linalg.norm(d.qvel[0:2])
         metrics = {f"reward/{k}": v for k, v in terms.items()}
         metrics.update(
@@ -331,28 +307,11 @@ class AnymalToFEnv(Env):
 
     def _step_kinematics(self, d) -> StepKinematics:
         """Foot kinematics (analytic FK on the physics model), contacts, gravity, foot edges."""
-        fk, foot_vel = self._foot_kinematics(d)
-        sr = self.spec.reward
-        return StepKinematics(
-            fk=fk,
-            foot_vel=foot_vel,
-            contact=self._contact(fk.foot_pos),
-            gravity=_projected_gravity(d.qpos[3:7]),
-            foot_edge=rw.foot_edges(
-                fk.foot_pos,
-                self.hfield.height_at,
-                self.foot_radius_m,
-                self.spec.contact_margin_m,
-                sr.edge_radius_m,
-                sr.edge_height_m,
-            ),
-        )
+        return step_kinematics(d, self.spec, self.hfield, self.shank_scale, self.foot_radius_m)
 
     def _terminations(self, d, kin: StepKinematics, step, diverged) -> Ends:
         failed, knee_contact, stuck = self._failed(d, kin.gravity, kin.fk)
-        failed = failed | diverged
-        truncated = (step >= self.episode_steps) & ~failed
-        return Ends(failed, truncated, failed | truncated, knee_contact, stuck)
+        return term.ends(failed, knee_contact, stuck, step, self.episode_steps, diverged)
 
     def _guidance_weight(self, env_steps) -> jax.Array:
         """The guidance bias weight (rewards.guidance_weight) from this env's step counter: each
@@ -426,64 +385,20 @@ class AnymalToFEnv(Env):
     # Internals
     def _foot_kinematics(self, d) -> tuple[kinematics.FootKinematics, jax.Array]:
         """World FK of the physics model and (4, 3) world foot-centre velocities (FK Jacobian)."""
-        qpos, qvel = d.qpos, d.qvel
-
-        def fk_world(q):
-            return kinematics.world_foot_kinematics(jp.concatenate([qpos[:7], q]), self.shank_scale)
-
-        fk, dfk = jax.jvp(fk_world, (qpos[7:19],), (qvel[6:18],))
-        omega_w = (
-            kinematics.quat_to_mat(qpos[3:7]) @ qvel[3:6]
-        )  # free-joint ang. vel. is body-frame
-        lever = fk.foot_pos - qpos[0:3]
-        return fk, qvel[0:3] + jp.cross(omega_w, lever) + dfk.foot_pos
+        return foot_kinematics(d, self.shank_scale)
 
     def _failed(self, d, gravity, fk: kinematics.FootKinematics):
         """Failure (any of :meth:`fail_reasons`), (4,) knee contacts (1.0 where a knee touches)
-        and whether a foot is stuck (``foot_stuck``, its own reason)."""
-        reasons, knee_contact = self._fail_reasons(d, gravity, fk)
-        failed = functools.reduce(jp.logical_or, reasons.values())
-        return failed, knee_contact.astype(jp.float32), reasons["foot_stuck"]
+        and whether a foot is stuck (``foot_stuck``, its own reason): terminations.failed."""
+        return term.failed(self.spec, self.hfield, d, gravity, fk)
 
     def fail_reasons(self, d) -> dict:
         """{reason: () bool} for the physics state ``d`` after a step, keyed by FAIL_REASONS (a
-        jitted call returns the keys sorted): which of the failure terminations hold there (the episode fails where any does; a
-        diverged simulation fails too, flagged by the step itself)."""
+        jitted call returns the keys sorted): which of the failure terminations hold there (the
+        episode fails where any does; a diverged simulation fails too, flagged by the step
+        itself). The rules: terminations.fail_reasons."""
         kin = self._step_kinematics(d)
-        return self._fail_reasons(d, kin.gravity, kin.fk)[0]
-
-    def _fail_reasons(self, d, gravity, fk: kinematics.FootKinematics):
-        """({reason: () bool} in FAIL_REASONS order, (4,) bool knee contacts): the base touches
-        the terrain (knee contact too if ``env.knee_contact_terminates``), the base fell into a
-        gap, a foot went below ``env.foot_fall_z_m``, a foot is stuck in a gap, bad
-        orientation."""
-        sp = self.spec
-        base_pos, base_quat = d.qpos[0:3], d.qpos[3:7]
-        centres = kinematics.base_to_world(
-            jp.asarray(BASE_SPHERE_CENTRES_M, jp.float32), base_pos, base_quat
-        )
-        base_clear = centres[:, 2] - self.hfield.height_at(centres[:, :2]) - BASE_SPHERE_RADIUS_M
-        knees = fk.knee_pos
-        knee_clear = knees[:, 2] - self.hfield.height_at(knees[:, :2]) - KNEE_SPHERE_RADIUS_M
-        knee_contact = knee_clear < sp.body_contact_margin_m
-        body_contact = jp.min(base_clear) < sp.body_contact_margin_m
-        if sp.knee_contact_terminates:
-            body_contact = body_contact | jp.any(knee_contact)
-        fell = base_pos[2] < self.hfield.z_floor_m + sp.fall_height_above_floor_m
-        foot_deep = jp.min(fk.foot_pos[:, 2]) < sp.foot_fall_z_m
-        stuck = jp.zeros((), bool)
-        if sp.foot_stuck_depth_m > 0:
-            stuck = jp.any(foot_stuck(fk.foot_pos, self.hfield.height_at, sp.foot_stuck_depth_m))
-        flipped = gravity[2] > -math.cos(math.radians(sp.max_tilt_deg))
-        reasons = dict(
-            zip(FAIL_REASONS, (body_contact, fell, foot_deep, stuck, flipped), strict=True)
-        )
-        return reasons, knee_contact
-
-    def _contact(self, foot_pos: jax.Array) -> jax.Array:
-        """(4,) float32: 1 where a foot centre is within radius + contact margin of the terrain."""
-        clear = foot_pos[:, 2] - self.hfield.height_at(foot_pos[:, :2])
-        return (clear < self.foot_radius_m + self.spec.contact_margin_m).astype(jp.float32)
+        return term.fail_reasons(self.spec, self.hfield, d, kin.gravity, kin.fk)[0]
 
     def _progress(self, task: TaskState, base_xy) -> jax.Array:
         return curriculum.progress_fraction(task.spawn[:2], task.goal, base_xy)
@@ -509,12 +424,12 @@ class AnymalToFEnv(Env):
         d, task = self._reset_core(key_core, level, col)
         if overrides:
             task = task.replace(params=task.params.replace(**overrides))
-        meas = self._measure(key_meas, d, task.params)
+        meas = sensing.measure(key_meas, d, task.params)
         sensor_state, sense = self.sensing.reset(key_sense, d, meas)
         seen = None
         if self.spec.actor_terrain_seen:  # static
             seen = self._mark_seen(self._fresh_seen(task), sense)
-        obs = self._observe(d, task, sense, meas, seen)
+        obs = self.observer(d, task, sense, meas, seen)
         zero = jp.zeros(())
         metrics = {f"reward/{k}": zero for k in rw.REWARD_TERMS}
         metrics.update({k: zero for k in EPISODE_METRICS + STEP_METRICS})
@@ -565,16 +480,6 @@ class AnymalToFEnv(Env):
         )
         return d, task
 
-    def _measure(self, key, d, p: EpisodeParams) -> sensing.Measurements:
-        """Joint readings (Gaussian noise + static offset) and odometry (uniform noise)."""
-        k1, k2 = jax.random.split(key)
-        q = d.qpos[7:19] + p.joint_offset_rad
-        q = q + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))  # ~ N(0, std^2)
-        lin_b = kinematics.quat_rotate_inv(d.qpos[3:7], d.qvel[0:3])
-        # odometry noise ~ U(+-0.1 level) m/s, U(+-0.2 level) rad/s per axis (paper's 100 % = 1)
-        lin, ang = noisy_odometry(k2, lin_b, d.qvel[3:6], p.odometry_level)
-        return sensing.Measurements(q=q, lin_vel=lin, ang_vel=ang)
-
     def _fresh_seen(self, task: TaskState) -> tuple[jax.Array, jax.Array]:
         """(origin, seen) of an episode's empty grid of ray-hit cells, anchored at its spawn."""
         return self.seen_grid.init(task.spawn[:2])
@@ -584,105 +489,6 @@ class AnymalToFEnv(Env):
         origin, grid = seen
         pts = sense.hit_points.reshape(-1, 3)
         return origin, self.seen_grid.mark(origin, grid, pts, sense.hit_valid.reshape(-1))
-
-    def _actor_terrain(self, seen, fk, patches, scan, base_pos, base_quat) -> jax.Array:
-        """The teacher's terrain inputs (env.actor_terrain): the foot patches (36) and the base
-        scan up to 0.6 m ahead (117), true heights; with env.actor_terrain_seen, each point only
-        where a foot sensor's ray has hit its cell this episode, else flat ground at the nominal
-        stance (a patch: -foot radius below the foot centre; the scan: -stand height below the
-        base), followed by the 153 seen flags {0, 1}."""
-        n = obs_lib.ACTOR_SCAN_POINTS
-        heights = jp.concatenate([patches, scan[:n]])
-        if not self.spec.actor_terrain_seen:  # static
-            return heights
-        pts = jp.concatenate(
-            [
-                obs_lib.foot_patch_points(fk.foot_pos).reshape(-1, 2),
-                obs_lib.world_scan_points(base_pos, base_quat)[:n],
-            ]
-        )
-        flags = self.seen_grid.lookup(seen[0], seen[1], pts)
-        fill = jp.concatenate(
-            [jp.full(patches.shape, -self.foot_radius_m), jp.full((n,), -self._stand_height)]
-        )
-        return jp.concatenate([jp.where(flags, heights, fill), flags.astype(jp.float32)])
-
-    def _observe(self, d, task: TaskState, sense, meas: sensing.Measurements, seen=None) -> dict:
-        """Actor and critic observations.
-
-        Actor ``state`` (size 181 for 4 sensors x 16 zones): tof readings (F x Z [m]) + validity
-        (F x Z) + frame age (F [s]) + joint positions rel. to default (12, measured) + joint
-        velocities (12, noisy, x0.05) + projected gravity (3) + base linear velocity estimate (3,
-        base frame) + base angular velocity estimate (3, x0.25) + goal distance (1, clipped at
-        5 m) + goal direction in the base frame (2, unit) + time left (1, fraction) + last
-        action (12); with ``env.actor_terrain`` (a teacher) also the true terrain heights
-        around each foot (4 x 9, as the critic's) and the base scan up to 0.6 m ahead (117, the
-        first ACTOR_SCAN_ROWS rows of the critic's); with ``env.actor_terrain_seen`` those only
-        where a foot ray has hit, and 153 seen flags (:meth:`_actor_terrain`); the layout:
-        foottof.envs.observations.
-        Critic ``privileged_state``: the same without noise (true readings, joints, velocities)
-        + true terrain heights around each foot relative to the foot centre (4 x 9, 10 cm grid)
-        + foot contacts (4) + friction (1) + added base mass (1, x0.1) + with
-        ``env.critic_height_scan``, the terrain heights relative to the base at
-        :func:`~foottof.envs.observations.critic_scan_points` (171, base-yaw frame, clipped to
-        +-1 m).
-        """
-        p = task.params
-        qpos, qvel = d.qpos, d.qvel
-        base_quat = qpos[3:7]
-        qd = qvel[6:18]
-        qd_meas = qd + p.joint_vel_noise_rads * jax.random.normal(task.rng, (12,))
-        gravity = _projected_gravity(base_quat)
-        lin_b = kinematics.quat_rotate_inv(base_quat, qvel[0:3])
-        to_goal_w = jp.concatenate([task.goal - qpos[0:2], jp.zeros(1)])
-        to_goal_b = kinematics.quat_rotate_inv(base_quat, to_goal_w)[:2]
-        dist = jp.linalg.norm(to_goal_b)
-        direction = to_goal_b / jp.maximum(dist, 1e-6)
-        time_left = 1.0 - task.step.astype(jp.float32) / self.episode_steps
-        goal_feats = jp.concatenate([jp.minimum(dist, 5.0)[None], direction, time_left[None]])
-
-        def actor(tof, valid, q_in, qd_in, lin, ang):
-            return obs_lib.actor_observation(
-                tof, valid, sense.age_s, q_in, qd_in, gravity, lin, ang, goal_feats,
-                task.last_action, self._default_q,
-            )  # fmt: skip
-
-        state_obs = actor(sense.distance, sense.valid, meas.q, qd_meas, meas.lin_vel, meas.ang_vel)
-        clean = actor(sense.true_distance, sense.true_valid, qpos[7:19], qd, lin_b, qvel[3:6])
-        fk = kinematics.world_foot_kinematics(qpos, self.shank_scale)
-        patches = obs_lib.foot_patches(self.hfield.height_at, fk.foot_pos)
-        contact = self._contact(fk.foot_pos)
-        parts = [
-            clean,
-            patches,  # 4 feet x 9 heights [m]
-            contact,  # 4
-            p.friction[None],  # 1
-            p.added_mass_kg[None] * 0.1,  # 1
-        ]
-        scan = None
-        if self.spec.critic_height_scan or self.spec.actor_terrain:  # static
-            scan = obs_lib.critic_height_scan(self.hfield.height_at, qpos[0:3], base_quat)  # 171
-        if self.spec.critic_height_scan:
-            parts.append(scan)
-        priv = jp.concatenate(parts)
-        if self.spec.actor_terrain:  # static: a teacher's actor also sees the terrain, true
-            terrain = self._actor_terrain(seen, fk, patches, scan, qpos[0:3], base_quat)
-            state_obs = jp.concatenate([state_obs, terrain])
-        if self.spec.actor_terrain_fine:  # static: and 5 cm apart in between (372)
-            fine = fine_terrain.fine_terrain(
-                self.hfield.height_at, fk.foot_pos, qpos[0:3], base_quat
-            )
-            state_obs = jp.concatenate([state_obs, fine])
-        lim = self.spec.clip_observations
-        return {
-            "state": jp.clip(jp.nan_to_num(state_obs), -lim, lim),
-            "privileged_state": jp.clip(jp.nan_to_num(priv), -lim, lim),
-        }
-
-
-def _projected_gravity(base_quat: jax.Array) -> jax.Array:
-    """(3,) the gravity direction in the base frame (unit; (0, 0, -1) when level)."""
-    return kinematics.quat_rotate_inv(base_quat, jp.array([0.0, 0.0, -1.0]))
 
 
 def _keep_perturbation(fresh: EpisodeParams, old: EpisodeParams) -> EpisodeParams:

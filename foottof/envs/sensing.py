@@ -11,6 +11,7 @@ from foottof import constants
 from foottof.perception import check_source
 from foottof.perception import elevation_map as em
 from foottof.perception import sources as mock
+from foottof.perception.odometry import noisy_odometry
 from foottof.robot import kinematics
 from foottof.sensors import degradation as deg
 from foottof.sensors import timing, tof
@@ -30,6 +31,22 @@ class Measurements:
     q: jax.Array
     lin_vel: jax.Array
     ang_vel: jax.Array
+
+
+def measure(key, d, p) -> Measurements:
+    """Joint readings (Gaussian noise + static offset) and odometry (uniform noise).
+
+    Args:
+      key: PRNG key of this draw; d: the physics state; p: the episode's EpisodeParams (joint
+        offset and noise, odometry level).
+    """
+    k1, k2 = jax.random.split(key)
+    q = d.qpos[7:19] + p.joint_offset_rad
+    q = q + p.joint_pos_noise_rad * jax.random.normal(k1, (12,))  # ~ N(0, std^2)
+    lin_b = kinematics.quat_rotate_inv(d.qpos[3:7], d.qvel[0:3])
+    # odometry noise ~ U(+-0.1 level) m/s, U(+-0.2 level) rad/s per axis (paper's 100 % = 1)
+    lin, ang = noisy_odometry(k2, lin_b, d.qvel[3:6], p.odometry_level)
+    return Measurements(q=q, lin_vel=lin, ang_vel=ang)
 
 
 @struct.dataclass

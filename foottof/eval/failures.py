@@ -51,7 +51,7 @@ import numpy as np
 from foottof.constants import CONTROL_DT_S
 
 CAUSES = ("success", "foot_stuck", "fell_base_low", "other_fall", "timeout")
-# Which terminations held in the pose a failed episode ended in (anymal_tof.FAIL_REASONS, then a
+# Which terminations held in the pose a failed episode ended in (terminations.FAIL_REASONS, then a
 # diverged simulation); more than one may hold at once.
 REASONS = ("body_contact", "fell", "foot_deep", "foot_stuck", "flipped", "diverged")
 PIT_FLOOR_TOL_M = 0.05  # terrain within this of the pit floor under a foot: it is over a gap [m]
@@ -318,6 +318,27 @@ class Failures(NamedTuple):
     # centre) before the last step
 
 
+class Trace(NamedTuple):
+    """What the failures rollout records at each step t (T = episode steps + 1) of env e (E),
+    before the step (the pose an ending step starts from) or from its outcome."""
+
+    done: np.ndarray  # (T, E) 1.0 where step t ended the episode
+    success: np.ndarray  # (T, E) episode/success of step t
+    failed: np.ndarray  # (T, E) episode/failed of step t
+    foot_stuck: np.ndarray  # (T, E) episode/foot_stuck of step t
+    base_z: np.ndarray  # (T, E) base height before step t [m]
+    progress: np.ndarray  # (T, E) episode/progress of step t [-]
+    col: np.ndarray  # (T, E) terrain column before step t
+    base_xy: np.ndarray  # (T, E, 2) base x, y before step t [m]
+    why: np.ndarray  # (T, E, len(REASONS)) bool: terminations in step t's pose (before a reset)
+    foot_pos: np.ndarray  # (T, E, 4, 3) foot centres before step t [m]
+    depth: np.ndarray  # (T, E, 4) foot depth below the terrain around (foot_gap_depth) [m]
+    # with sight: ray origins (T, E, F, 3), directions (T, E, F, R, 3), hits (T, E, F, R), the
+    # teacher's sample points (T, E, 153, 2) and heights (T, E, 153), (with a seen teacher)
+    # their seen flags (T, E, 153); else ()
+    rays: tuple
+
+
 def run(
     cfg,
     checkpoint: str | None,
@@ -340,27 +361,58 @@ def run(
     env.actor_terrain sample points, :func:`scan_sightings`, whether or not the policy reads
     them; for a seen teacher, env.actor_terrain_seen, only the points it read as seen), else
     None."""
+    import jax.numpy as jp
+
+    from foottof.terrain import TERRAIN_TYPES
+
+    env, tr = rollout_trace(cfg, checkpoint, episodes, seed, sight, training_level)
+    cause = classify(tr.done, tr.success, tr.failed, tr.foot_stuck, tr.base_z)
+    ended = tr.done > 0.5
+    t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), tr.done.shape[0] - 1)
+    e = np.arange(episodes)
+    reasons = tr.why[t, e] & (tr.failed[t, e] > 0.5)[:, None]  # (E, R), only where it failed
+    types = np.asarray(env.tmap.col_type)[tr.col[0]]
+    is_stuck = cause == CAUSES.index("foot_stuck")
+    foot = np.where(is_stuck, np.argmax(tr.depth[t, e], axis=-1), -1)
+    xy = tr.foot_pos[t, e, np.maximum(foot, 0), :2]  # (E, 2) the foot that went in
+    height_at = lambda p: np.asarray(env.hfield.height_at(jp.asarray(p, jp.float32)))  # noqa: E731
+    gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
+    rim = np.where(is_stuck, stone_distance(xy, height_at), np.nan)
+    rows = _sighting_rows(env, tr, t, foot, xy, is_stuck) if sight else None
+    timeout = cause == CAUSES.index("timeout")
+    stall = np.array([stall_step(tr.base_xy[:, i], t[i]) if timeout[i] else -1 for i in e])
+    stall_prog = np.where(stall >= 0, tr.progress[np.maximum(stall, 0), e], np.nan)
+    types = [TERRAIN_TYPES[i] for i in types]
+    start = start_step(tr.progress, t)
+    return Failures(
+        cause, types, t, tr.progress[t, e], foot, gap, rim, rows, stall, stall_prog, start,
+        reasons, feet_over_gap(tr.foot_pos[t, e], height_at, env.hfield.z_floor_m),
+    )  # fmt: skip
+
+
+def rollout_trace(
+    cfg,
+    checkpoint: str | None,
+    episodes: int,
+    seed: int,
+    sight: bool = False,
+    training_level: int | None = None,
+):
+    """(env, :class:`Trace`) of one deterministic episode per env, the arguments as :func:`run`'s."""
     import jax
     import jax.numpy as jp
 
     from foottof.envs import observations as obs_lib
-    from foottof.envs.anymal_tof import FAIL_REASONS, SEEN_KEY
+    from foottof.envs.anymal_tof import SEEN_KEY
     from foottof.envs.stuck_probe import foot_gap_depth
-    from foottof.eval.harness import make_eval_env_and_policy
+    from foottof.envs.terminations import FAIL_REASONS
     from foottof.robot.kinematics import world_foot_kinematics
     from foottof.sensors import tof
-    from foottof.terrain import TERRAIN_TYPES
 
     key = jax.random.PRNGKey(seed)
-    if training_level is None:
-        env, nets, params, norm = make_eval_env_and_policy(cfg, "tof", checkpoint, key, key)
-        state = jax.jit(jax.vmap(env.reset))(jax.random.split(key, episodes))
-    else:
-        env, nets, params, norm = training_env_and_policy(cfg, checkpoint, key, training_level)
-        cols = jp.arange(episodes, dtype=jp.int32) % env.tmap.num_cols
-        levels = jp.full((episodes,), training_level, jp.int32)
-        reset = jax.jit(jax.vmap(env._reset_episode))  # explicit tiles (level, column)
-        state = reset(jax.random.split(key, episodes), levels, cols)
+    env, nets, params, norm, state = _env_policy_and_state(
+        cfg, checkpoint, episodes, key, training_level
+    )
     act = nets.policy_fn(params, norm, deterministic=True)
     step = jax.vmap(env.step)
 
@@ -408,57 +460,66 @@ def run(
         init = (state, nets.init_carry(episodes), jp.ones((episodes,), bool))
         return jax.lax.scan(body, init, jax.random.split(key, env.episode_steps + 1))[1]
 
-    done, succ, fail, stuck, base_z, prog, col, base_xy, why, foot_pos, depth, *rays = (
-        np.asarray(x) for x in jax.device_get(rollout(state))
-    )
-    cause = classify(done, succ, fail, stuck, base_z)
-    ended = done > 0.5
-    t = np.where(ended.any(axis=0), np.argmax(ended, axis=0), done.shape[0] - 1)
-    e = np.arange(episodes)
-    reasons = why[t, e] & (fail[t, e] > 0.5)[:, None]  # (E, R), only where the episode failed
-    types = np.asarray(env.tmap.col_type)[col[0]]
-    is_stuck = cause == CAUSES.index("foot_stuck")
-    foot = np.where(is_stuck, np.argmax(depth[t, e], axis=-1), -1)
-    xy = foot_pos[t, e, np.maximum(foot, 0), :2]  # (E, 2) the foot that went in
-    height_at = lambda p: np.asarray(env.hfield.height_at(jp.asarray(p, jp.float32)))  # noqa: E731
-    gap = np.where(is_stuck, gap_direction(xy, height_at), -1)
-    rim = np.where(is_stuck, stone_distance(xy, height_at), np.nan)
-    rows = None
-    if sight:
-        origins, dirs, t_hit, scan_xy, scan_h, *flags = rays
-        scan_seen = flags[0] if flags else None
-        rows = []
-        for i in np.nonzero(is_stuck)[0]:
-            f = foot[i]
-            top = depth[t[i], i, f] + foot_pos[t[i], i, f, 2]  # the stone tops around the foot
-            looked, seen = sightings(
-                xy[i], top, origins[:, i], dirs[:, i], t_hit[:, i], env.sensing.spec.max_range_m
-            )
-            drop, gap_lead, look_lead, swung = sighting_summary(
-                foot_pos[:, i, f, 2], top, t[i], looked, seen
-            )
-            own = np.nonzero(sites == f)[0]  # the stuck foot's own sensor (if it has one)
-            own_lead = sighting_summary(foot_pos[:, i, f, 2], top, t[i], looked, seen[:, own])[1]
-            s_looked, s_gap = scan_sightings(
-                xy[i],
-                top,
-                scan_xy[:, i],
-                scan_h[:, i],
-                None if scan_seen is None else scan_seen[:, i],
-            )
-            scan_gap, scan_look = sighting_summary(
-                foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap
-            )[1:3]
-            rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung, scan_look, scan_gap))
-    timeout = cause == CAUSES.index("timeout")
-    stall = np.array([stall_step(base_xy[:, i], t[i]) if timeout[i] else -1 for i in e])
-    stall_prog = np.where(stall >= 0, prog[np.maximum(stall, 0), e], np.nan)
-    types = [TERRAIN_TYPES[i] for i in types]
-    start = start_step(prog, t)
-    return Failures(
-        cause, types, t, prog[t, e], foot, gap, rim, rows, stall, stall_prog, start, reasons,
-        feet_over_gap(foot_pos[t, e], height_at, env.hfield.z_floor_m),
-    )  # fmt: skip
+    recorded = [np.asarray(x) for x in jax.device_get(rollout(state))]
+    n = len(Trace._fields) - 1
+    return env, Trace(*recorded[:n], rays=tuple(recorded[n:]))
+
+
+def _env_policy_and_state(cfg, checkpoint, episodes: int, key, training_level):
+    """(env, networks, params, normalizer, first states of ``episodes`` envs): the evaluation
+    ensemble's (training_level None) or the training map's at that level, env i on column i."""
+    import jax
+    import jax.numpy as jp
+
+    from foottof.eval.harness import make_eval_env_and_policy
+
+    if training_level is None:
+        env, nets, params, norm = make_eval_env_and_policy(cfg, "tof", checkpoint, key, key)
+        state = jax.jit(jax.vmap(env.reset))(jax.random.split(key, episodes))
+    else:
+        env, nets, params, norm = training_env_and_policy(cfg, checkpoint, key, training_level)
+        cols = jp.arange(episodes, dtype=jp.int32) % env.tmap.num_cols
+        levels = jp.full((episodes,), training_level, jp.int32)
+        reset = jax.jit(jax.vmap(env._reset_episode))  # explicit tiles (level, column)
+        state = reset(jax.random.split(key, episodes), levels, cols)
+    return env, nets, params, norm, state
+
+
+def _sighting_rows(env, tr: Trace, t, foot, xy, is_stuck) -> list:
+    """One :func:`run` sightings row per foot_stuck episode, from a trace recorded with sight.
+
+    Args:
+      t: (E,) end steps; foot: (E,) the foot in the gap; xy: (E, 2) where it went in;
+      is_stuck: (E,) the foot_stuck episodes.
+    """
+    sites = np.asarray(env.sensing.feet, np.int32)  # the foot of each sensor
+    origins, dirs, t_hit, scan_xy, scan_h, *flags = tr.rays
+    scan_seen = flags[0] if flags else None
+    foot_pos, depth = tr.foot_pos, tr.depth
+    rows = []
+    for i in np.nonzero(is_stuck)[0]:
+        f = foot[i]
+        top = depth[t[i], i, f] + foot_pos[t[i], i, f, 2]  # the stone tops around the foot
+        looked, seen = sightings(
+            xy[i], top, origins[:, i], dirs[:, i], t_hit[:, i], env.sensing.spec.max_range_m
+        )
+        drop, gap_lead, look_lead, swung = sighting_summary(
+            foot_pos[:, i, f, 2], top, t[i], looked, seen
+        )
+        own = np.nonzero(sites == f)[0]  # the stuck foot's own sensor (if it has one)
+        own_lead = sighting_summary(foot_pos[:, i, f, 2], top, t[i], looked, seen[:, own])[1]
+        s_looked, s_gap = scan_sightings(
+            xy[i],
+            top,
+            scan_xy[:, i],
+            scan_h[:, i],
+            None if scan_seen is None else scan_seen[:, i],
+        )
+        scan_gap, scan_look = sighting_summary(foot_pos[:, i, f, 2], top, t[i], s_looked, s_gap)[
+            1:3
+        ]
+        rows.append((int(i), drop, gap_lead, look_lead, own_lead, swung, scan_look, scan_gap))
+    return rows
 
 
 def format_sightings(rows, gap) -> str:
@@ -616,7 +677,7 @@ def format_table(cause, types, end_step, progress) -> str:
 
 
 def main(argv=None) -> None:
-    from configs import load_config  # the repo's config files (run from the repo root)
+    from foottof.config_file import load_config  # the repo's configs/*.py (run from the repo root)
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("run_dir", help="run directory, its checkpoints/ or one checkpoint")
@@ -641,8 +702,8 @@ def main(argv=None) -> None:
         raise SystemExit(f"error: --difficulty_fraction={args.difficulty_fraction} outside [0, 1]")
     if args.episodes < 1:
         raise SystemExit(f"error: --episodes={args.episodes} must be >= 1")
-    from foottof.ppo.checkpoint import CheckpointUnreadable
-    from foottof.ppo.run_dir import with_run_network
+    from foottof.ppo.storage.checkpoint import CheckpointUnreadable
+    from foottof.ppo.storage.run_dir import with_run_network
 
     cfg = with_run_network(load_config(args.config), args.run_dir)
     cfg.eval.difficulty_fraction = args.difficulty_fraction

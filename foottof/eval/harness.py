@@ -11,8 +11,8 @@ import jax.numpy as jp
 import ml_collections
 
 from foottof.envs import AnymalToFEnv, make_env
-from foottof.ppo.checkpoint import CheckpointUnreadable, load_params_and_normalizer
 from foottof.ppo.networks import make_networks
+from foottof.ppo.storage.checkpoint import CheckpointUnreadable, load_params_and_normalizer
 
 
 def eval_config(cfg: ml_collections.ConfigDict, perturbation: str, level: float):

@@ -176,7 +176,7 @@ def _stone_curriculum_moot(cfg) -> bool:
     """True where every stone type of the evaluation ensemble is drawn at a difficulty at or past
     tiles.ENSEMBLE_KNOT, from where all stone curricula hold the same values (exactly: a knot's
     values at the knot), so terrain.stone_curriculum does not change the episodes."""
-    from foottof.terrain.tiles import ENSEMBLE_KNOT, STONE_TYPES
+    from foottof.limits import ENSEMBLE_KNOT, STONE_TYPES
 
     frac = float(cfg.eval.difficulty_fraction)
     for name in cfg.eval.stone_types:

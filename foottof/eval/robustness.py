@@ -16,6 +16,7 @@ shank_length level needs its own physics model, hence its own compile):
 
 from __future__ import annotations
 
+import functools
 import math
 
 import jax
@@ -229,7 +230,6 @@ def evaluate_sweep(
     key_map, key_init, key_run = jax.random.split(key, 3)
     traced = perturbation in TRACED_PERTURBATIONS
     groups = [levels] if traced or perturbation == "none" else [(lv,) for lv in levels]
-    type_names = np.asarray(TERRAIN_TYPES)
     stored = {
         lv: (cells.load(source, perturbation, lv) if cells is not None else None) for lv in levels
     }
@@ -257,28 +257,45 @@ def evaluate_sweep(
             deterministic=bool(cfg.eval.deterministic),
             on_step=None if ticks is None else ticks.step,
         )
+        terrain_of_col = np.asarray(TERRAIN_TYPES)[col_type]  # (C,) type name per column
+        run = functools.partial(rollout, params, normalizer)
         for level in todo:
-            parts, collected, k_run = [], 0, key_run
-            while collected < episodes:
-                k_run, k = jax.random.split(k_run)
-                take = min(num_envs, episodes - collected)
-                if ticks is not None:
-                    ticks.start(take)
-                outs, col = jax.device_get(rollout(params, normalizer, k, jp.float32(level)))
-                if ticks is not None:
-                    jax.effects_barrier()  # every step's callback has run
-                    ticks.finish()
-                res = first_episode_outcomes(*outs)
-                res["terrain"] = type_names[col_type[col]]
-                parts.append({n: v[:take] for n, v in res.items()})
-                collected += take
-            merged = {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
+            merged = _run_level(run, level, key_run, episodes, num_envs, terrain_of_col, ticks)
             done[level] = (summarize(source, perturbation, level, merged), merged)
             if cells is not None:
                 cells.save(*done[level])
     rows = [done[lv][0] for lv in levels]
     outcomes = [done[lv][1] for lv in levels]
     return (rows, outcomes) if return_outcomes else rows
+
+
+def _run_level(run, level, key_run, episodes: int, num_envs: int, terrain_of_col, ticks) -> dict:
+    """The first-episode outcomes of ``episodes`` episodes at one level, in batches of at most
+    ``num_envs`` (the key split once per batch off ``key_run``: the same draws at every level).
+
+    Args:
+      run: ``run(key, level) -> (outs, col)``, the compiled rollout with its policy bound.
+      terrain_of_col: (C,) the terrain type name of each map column.
+      ticks: a _StepTicks advancing the progress bar during each batch, or None.
+
+    Returns:
+      {outcome: (episodes,) array}: first_episode_outcomes and ``terrain``.
+    """
+    parts, collected, k_run = [], 0, key_run
+    while collected < episodes:
+        k_run, k = jax.random.split(k_run)
+        take = min(num_envs, episodes - collected)
+        if ticks is not None:
+            ticks.start(take)
+        outs, col = jax.device_get(run(k, jp.float32(level)))
+        if ticks is not None:
+            jax.effects_barrier()  # every step's callback has run
+            ticks.finish()
+        res = first_episode_outcomes(*outs)
+        res["terrain"] = terrain_of_col[col]
+        parts.append({n: v[:take] for n, v in res.items()})
+        collected += take
+    return {n: np.concatenate([p[n] for p in parts]) for n in parts[0]}
 
 
 class _StepTicks:

@@ -18,7 +18,7 @@ import numpy as np
 import orbax.checkpoint as ocp
 
 from foottof import renames
-from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
+from foottof.ppo.storage.run_dir import CHECKPOINT_SUBDIR
 from foottof.terrain.terrain_map import TERRAIN_TYPES, TerrainMapSpec
 
 # Leaves of the 'rollout' item (checkpoint manifest names) holding each env's level and map column.

@@ -108,7 +108,7 @@ def format_markdown(rows: list[dict]) -> str:
 
 
 def main(argv=None) -> None:
-    from configs import load_config  # the repo's config files (run from the repo root)
+    from foottof.config_file import load_config  # the repo's configs/*.py (run from the repo root)
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--config", default="configs/stage1_cpu.py")

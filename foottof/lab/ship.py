@@ -15,9 +15,9 @@ import argparse
 import os
 import shutil
 
-from foottof.ppo.integrity import INTEGRITY_FILE, integrity_problem, write_integrity
-from foottof.ppo.run_dir import CHECKPOINT_SUBDIR
 from foottof.ppo.runner import trim_metrics
+from foottof.ppo.storage.integrity import INTEGRITY_FILE, integrity_problem, write_integrity
+from foottof.ppo.storage.run_dir import CHECKPOINT_SUBDIR
 
 RUN_FILES = ("config.json", "config.yaml", "metrics.csv", "teacher.json")  # those the run has
 DEFAULT_MAX_MB = 20.0  # the repo's limit for a shipped policy

@@ -71,7 +71,7 @@ class ActorCritic(nn.Module):
     head reads its (normalized) observation beside its LSTM's output, [h, obs], so the current
     readings reach the head without passing the LSTM; the observation rows of the heads' first
     kernels are the last ones (a checkpoint without them grows into this model with those rows
-    zero: foottof.ppo.checkpoint).
+    zero: foottof.ppo.storage.checkpoint).
     """
 
     action_size: int

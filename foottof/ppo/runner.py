@@ -274,18 +274,7 @@ def run(
         resume continues bit-exactly once there is space.
     """
     cfg = _prepare_cfg(cfg)
-    if resume and init_from:
-        raise ValueError("give resume=True or init_from, not both")
-    has_ckpt = run_dirs.has_checkpoint(run_dir)
-    if resume and not has_ckpt:
-        raise FileNotFoundError(
-            f"resume: no checkpoint in {run_dir}/{ckpt.CHECKPOINT_SUBDIR} (train.py: drop --resume)"
-        )
-    if not resume and has_ckpt:
-        raise FileExistsError(
-            f"{run_dir} already holds checkpoints; pass resume=True or a new run dir "
-            f"(train.py: --resume, or another --run_dir)"
-        )
+    _check_start(run_dir, resume, init_from)
     main = jax.process_index() == 0  # only process 0 writes config, logs and progress lines
     created = not os.path.exists(run_dir)
     lock = files.FolderLock(run_dir, "train.py") if main else None
@@ -324,6 +313,23 @@ def run(
             lock.release()
         if linked and not run_dirs.has_checkpoint(run_dir):
             run_dirs.forget_run(latest_link, previous, run_dir if created else None)
+
+
+def _check_start(run_dir: str, resume: bool, init_from: str | None) -> None:
+    """Raises ValueError (resume and init_from both given), FileNotFoundError (resume without a
+    checkpoint in ``run_dir``) or FileExistsError (a new run in a folder that holds checkpoints)."""
+    if resume and init_from:
+        raise ValueError("give resume=True or init_from, not both")
+    has_ckpt = run_dirs.has_checkpoint(run_dir)
+    if resume and not has_ckpt:
+        raise FileNotFoundError(
+            f"resume: no checkpoint in {run_dir}/{ckpt.CHECKPOINT_SUBDIR} (train.py: drop --resume)"
+        )
+    if not resume and has_ckpt:
+        raise FileExistsError(
+            f"{run_dir} already holds checkpoints; pass resume=True or a new run dir "
+            f"(train.py: --resume, or another --run_dir)"
+        )
 
 
 def gpu_sized_warning(cfg, backend: str) -> str | None:
@@ -426,21 +432,38 @@ def _disk_full_logging(run_dir: str, checkpointer, it: int, state) -> str:
     return files.disk_full_message(run_dir, f"logging iteration {it}", need, then)
 
 
+def _write_config_or_disk_full(cfg, run_dir: str) -> None:
+    """Writes config.json and config.yaml; a full disk raises files.DiskFull (one line)."""
+    try:
+        _write_config(cfg, run_dir)
+    except OSError as e:
+        if not files.is_disk_full(e):
+            raise
+        size = len(cfg.to_json_best_effort(indent=2)) + len(cfg.to_yaml())
+        raise files.DiskFull(
+            files.disk_full_message(run_dir, "writing config.json", size, "nothing changed")
+        ) from None
+
+
+def _save_interrupted(state, checkpointer, last_saved: int | None) -> None:
+    """On Ctrl-C: saves the last finished iteration unless it is saved or the state is gone
+    (donated) or not finite; one line says which."""
+    if _alive(state) and _params_finite(state.params):
+        step = int(state.iteration)
+        if step not in checkpointer.all_steps():
+            checkpointer.save(state)
+        print(f"[runner] interrupted: saved iteration {step} in {checkpointer.directory}")
+    else:
+        print(f"[runner] interrupted: kept checkpoint {last_saved} (state not saveable)")
+
+
 def _run(
     cfg, env, run_dir, resume, init_from, on_iteration, main, init_params=None
 ) -> train_lib.TrainState:
     """run() after the run-dir checks; see there."""
     t = cfg.train
     if main:
-        try:
-            _write_config(cfg, run_dir)
-        except OSError as e:
-            if not files.is_disk_full(e):
-                raise
-            size = len(cfg.to_json_best_effort(indent=2)) + len(cfg.to_yaml())
-            raise files.DiskFull(
-                files.disk_full_message(run_dir, "writing config.json", size, "nothing changed")
-            ) from None
+        _write_config_or_disk_full(cfg, run_dir)
 
     warning = gpu_sized_warning(cfg, jax.default_backend())
     if warning:
@@ -513,13 +536,7 @@ def _run(
         )
         raise distributed.ProcessLost(lost) from None
     except KeyboardInterrupt:
-        if _alive(state) and _params_finite(state.params):
-            step = int(state.iteration)
-            if step not in checkpointer.all_steps():
-                checkpointer.save(state)
-            print(f"[runner] interrupted: saved iteration {step} in {checkpointer.directory}")
-        else:
-            print(f"[runner] interrupted: kept checkpoint {last_saved} (state not saveable)")
+        _save_interrupted(state, checkpointer, last_saved)
         raise
     finally:
         if logs is not None:

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import functools
 import math
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jp
@@ -79,6 +80,24 @@ _FACE_NORMALS = (
 )
 
 
+class _Ray(NamedTuple):
+    """One ray in the walk's grid coordinates: p is the dominant horizontal axis (columns, or
+    rows where the ray is more along y), q the other; (p, q) in vertices, z in metres."""
+
+    o: jax.Array  # (3,) origin [m]
+    d: jax.Array  # (3,) unit direction
+    p0: jax.Array  # origin's p, q [vertices]
+    q0: jax.Array
+    dp: jax.Array  # vertices per metre along the ray, along p and q
+    dq: jax.Array
+    n_p: jax.Array  # vertices along p, q
+    n_q: jax.Array
+    s_p: jax.Array  # flat-index strides of p, q in h_flat
+    s_q: jax.Array
+    base: int  # index in h_flat of the ray's terrain
+    max_range_m: float
+
+
 def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: int, base=0):
     """First surface-triangle hit of one ray among strips ``first .. first + count - 1``.
 
@@ -104,87 +123,11 @@ def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: 
     dp, dq = jp.where(swap, dv, du), jp.where(swap, du, dv)
     n_p, n_q = jp.where(swap, nrow, ncol), jp.where(swap, ncol, nrow)  # vertices along p, q
     s_p, s_q = jp.where(swap, ncol, 1), jp.where(swap, 1, ncol)  # flat-index strides
-
-    def strip_hits(s):
-        """Hit parameters (..., 4) and (dz/dp, dz/dq) of the 4 triangles of strip(s) s."""
-        step_dir = jp.where(dp < 0.0, -1, 1)
-        k = jp.floor(p0).astype(jp.int32) + step_dir * s  # strip k spans p in [k, k + 1]
-        moving = dp != 0.0
-        dp_safe = jp.where(moving, dp, 1.0)
-        t_a = (k.astype(dt) - p0) / dp_safe
-        t_b = (k.astype(dt) + 1.0 - p0) / dp_safe
-        t_in = jp.where(moving, jp.maximum(jp.minimum(t_a, t_b), 0.0), 0.0)
-        t_out = jp.where(moving, jp.minimum(jp.maximum(t_a, t_b), max_range_m), max_range_m)
-        strip_ok = (t_in <= t_out) & (moving | (s == 0))
-        q_in, q_out = q0 + t_in * dq, q0 + t_out * dq
-        r = jp.floor(jp.minimum(q_in, q_out)).astype(jp.int32)  # rows r and r + 1 cover the strip
-
-        def vert(pi, qi):
-            pc = jp.clip(pi, 0, n_p - 1)
-            qc = jp.clip(qi, 0, n_q - 1)
-            return h_flat[base + pc * s_p + qc * s_q]
-
-        # Heights H[p, q] of the 2 x 3 vertices under the strip: rows r, r + 1, r + 2.
-        hk = [vert(k, r + j) for j in range(3)]
-        hk1 = [vert(k + 1, r + j) for j in range(3)]
-
-        # Vertices V(P, Q) relative to the ray origin in (cells, cells, m), computed from their
-        # indices only: a vertex shared by neighbouring cells or strips gets bit-identical
-        # coordinates. Each grid edge a -> b is tested with the same canonical orientation
-        # everywhere (E(a, b) = D . (a x b) = (D x a) . b, from the lower to the higher index), so
-        # the inside tests of adjacent triangles are exactly complementary: watertight, no
-        # tolerance needed. Strips are scanned one at a time (lax.scan): the per-strip working
-        # set stays in cache, ~4x faster on CPU than materializing all strips at once.
-        dz = d[2]
-        dd = dp * dp + dq * dq + dz * dz
-        heights = (hk, hk1)
-        vx = [k.astype(dt) + x - p0 for x in range(2)]
-        vy = [(r + y).astype(dt) - q0 for y in range(3)]
-        vz = [[heights[x][y] - o[2] for y in range(3)] for x in range(2)]
-        # cr = D x V and tv = (V . D) / (D . D) per vertex, indexed [x][y].
-        cr = [
-            [
-                (dq * vz[x][y] - dz * vy[y], dz * vx[x] - dp * vz[x][y], dp * vy[y] - dq * vx[x])
-                for y in range(3)
-            ]
-            for x in range(2)
-        ]
-        tv = [[(vx[x] * dp + vy[y] * dq + vz[x][y] * dz) / dd for y in range(3)] for x in range(2)]
-
-        def edge(a, b):  # a = (x, y) canonical first vertex, b = (x, y) second vertex
-            c = cr[a[0]][a[1]]
-            return c[0] * vx[b[0]] + c[1] * vy[b[1]] + c[2] * vz[b[0]][b[1]]
-
-        e_p = [edge((0, y), (1, y)) for y in range(3)]  # edges along p at rows r + y
-        ts = []
-        for j in range(2):  # cells (k, r + j): triangles A = (00, 10, 11) and B = (00, 11, 01)
-            rr = r + j
-            cell_ok = strip_ok & (k >= 0) & (k <= n_p - 2) & (rr >= 0) & (rr <= n_q - 2)
-            e_left = edge((0, j), (0, j + 1))
-            e_right = edge((1, j), (1, j + 1))
-            e_diag = edge((0, j), (1, j + 1))
-            t00, t10, t11, t01 = tv[0][j], tv[1][j], tv[1][j + 1], tv[0][j + 1]
-            for (w_ab, w_bc, w_ca), (ta, tb, tc) in (
-                ((e_p[j], e_right, -e_diag), (t00, t10, t11)),
-                ((e_diag, -e_p[j + 1], -e_left), (t00, t11, t01)),
-            ):
-                pos = (w_ab >= 0) & (w_bc >= 0) & (w_ca >= 0)
-                neg = (w_ab <= 0) & (w_bc <= 0) & (w_ca <= 0)
-                w_sum = w_ab + w_bc + w_ca
-                ok = cell_ok & (pos | neg) & (w_sum != 0.0)
-                # Hit point = barycentric mix (weights w_bc, w_ca, w_ab) -> its ray parameter.
-                t = (w_bc * ta + w_ca * tb + w_ab * tc) / jp.where(ok, w_sum, 1.0)
-                ts.append(jp.where(ok & (t >= 0.0) & (t <= max_range_m), t, jp.inf))
-        gps = []
-        for j in range(2):
-            h00, h01, h10, h11 = hk[j], hk[j + 1], hk1[j], hk1[j + 1]
-            gps += [(h10 - h00, h11 - h10), (h11 - h01, h01 - h00)]
-        g = jp.stack([jp.stack(gg, -1) for gg in gps], -2)  # (..., 4, 2)
-        return jp.stack(ts, -1), g
+    ray = _Ray(o, d, p0, q0, dp, dq, n_p, n_q, s_p, s_q, base, max_range_m)
 
     def scan_body(carry, s):
         best_t, best_g = carry
-        t4, g4 = strip_hits(s)
+        t4, g4 = _strip_hits(h_flat, ray, s)
         i = jp.argmin(t4)
         closer = t4[i] < best_t
         return (jp.where(closer, t4[i], best_t), jp.where(closer, g4[i], best_g)), None
@@ -203,6 +146,94 @@ def _walk(h_flat, hf: Heightfield, o, d, max_range_m: float, first: int, count: 
         return t_tri, g_best, jp.ones((), bool)
     more = ~jp.isfinite(t_tri) & (dp != 0.0) & (t_next <= max_range_m) & ~past_grid
     return t_tri, g_best, more
+
+
+def _strip_hits(h_flat, ray: _Ray, s):
+    """Hit parameters (4,) and (dz/dp, dz/dq) (4, 2) of the 4 triangles of the ray's strip s."""
+    p0, q0, dp, dq, max_range_m = ray.p0, ray.q0, ray.dp, ray.dq, ray.max_range_m
+    dt = ray.o.dtype
+    step_dir = jp.where(dp < 0.0, -1, 1)
+    k = jp.floor(p0).astype(jp.int32) + step_dir * s  # strip k spans p in [k, k + 1]
+    moving = dp != 0.0
+    dp_safe = jp.where(moving, dp, 1.0)
+    t_a = (k.astype(dt) - p0) / dp_safe
+    t_b = (k.astype(dt) + 1.0 - p0) / dp_safe
+    t_in = jp.where(moving, jp.maximum(jp.minimum(t_a, t_b), 0.0), 0.0)
+    t_out = jp.where(moving, jp.minimum(jp.maximum(t_a, t_b), max_range_m), max_range_m)
+    strip_ok = (t_in <= t_out) & (moving | (s == 0))
+    q_in, q_out = q0 + t_in * dq, q0 + t_out * dq
+    r = jp.floor(jp.minimum(q_in, q_out)).astype(jp.int32)  # rows r and r + 1 cover the strip
+
+    def vert(pi, qi):
+        pc = jp.clip(pi, 0, ray.n_p - 1)
+        qc = jp.clip(qi, 0, ray.n_q - 1)
+        return h_flat[ray.base + pc * ray.s_p + qc * ray.s_q]
+
+    # Heights H[p, q] of the 2 x 3 vertices under the strip: rows r, r + 1, r + 2.
+    hk = [vert(k, r + j) for j in range(3)]
+    hk1 = [vert(k + 1, r + j) for j in range(3)]
+    ts = _strip_triangle_hits(ray, k, r, strip_ok, hk, hk1)
+    gps = []
+    for j in range(2):
+        h00, h01, h10, h11 = hk[j], hk[j + 1], hk1[j], hk1[j + 1]
+        gps += [(h10 - h00, h11 - h10), (h11 - h01, h01 - h00)]
+    g = jp.stack([jp.stack(gg, -1) for gg in gps], -2)  # (..., 4, 2)
+    return jp.stack(ts, -1), g
+
+
+def _strip_triangle_hits(ray: _Ray, k, r, strip_ok, hk, hk1) -> list:
+    """The 4 ray parameters (inf: no hit) of the triangles of strip k over rows r, r + 1, from
+    the heights ``hk`` (p = k) and ``hk1`` (p = k + 1) of its vertices at rows r .. r + 2."""
+    o, d, p0, q0, dp, dq = ray.o, ray.d, ray.p0, ray.q0, ray.dp, ray.dq
+    dt, max_range_m = o.dtype, ray.max_range_m
+    # Vertices V(P, Q) relative to the ray origin in (cells, cells, m), computed from their
+    # indices only: a vertex shared by neighbouring cells or strips gets bit-identical
+    # coordinates. Each grid edge a -> b is tested with the same canonical orientation
+    # everywhere (E(a, b) = D . (a x b) = (D x a) . b, from the lower to the higher index), so
+    # the inside tests of adjacent triangles are exactly complementary: watertight, no
+    # tolerance needed. Strips are scanned one at a time (lax.scan): the per-strip working
+    # set stays in cache, ~4x faster on CPU than materializing all strips at once.
+    dz = d[2]
+    dd = dp * dp + dq * dq + dz * dz
+    heights = (hk, hk1)
+    vx = [k.astype(dt) + x - p0 for x in range(2)]
+    vy = [(r + y).astype(dt) - q0 for y in range(3)]
+    vz = [[heights[x][y] - o[2] for y in range(3)] for x in range(2)]
+    # cr = D x V and tv = (V . D) / (D . D) per vertex, indexed [x][y].
+    cr = [
+        [
+            (dq * vz[x][y] - dz * vy[y], dz * vx[x] - dp * vz[x][y], dp * vy[y] - dq * vx[x])
+            for y in range(3)
+        ]
+        for x in range(2)
+    ]
+    tv = [[(vx[x] * dp + vy[y] * dq + vz[x][y] * dz) / dd for y in range(3)] for x in range(2)]
+
+    def edge(a, b):  # a = (x, y) canonical first vertex, b = (x, y) second vertex
+        c = cr[a[0]][a[1]]
+        return c[0] * vx[b[0]] + c[1] * vy[b[1]] + c[2] * vz[b[0]][b[1]]
+
+    e_p = [edge((0, y), (1, y)) for y in range(3)]  # edges along p at rows r + y
+    ts = []
+    for j in range(2):  # cells (k, r + j): triangles A = (00, 10, 11) and B = (00, 11, 01)
+        rr = r + j
+        cell_ok = strip_ok & (k >= 0) & (k <= ray.n_p - 2) & (rr >= 0) & (rr <= ray.n_q - 2)
+        e_left = edge((0, j), (0, j + 1))
+        e_right = edge((1, j), (1, j + 1))
+        e_diag = edge((0, j), (1, j + 1))
+        t00, t10, t11, t01 = tv[0][j], tv[1][j], tv[1][j + 1], tv[0][j + 1]
+        for (w_ab, w_bc, w_ca), (ta, tb, tc) in (
+            ((e_p[j], e_right, -e_diag), (t00, t10, t11)),
+            ((e_diag, -e_p[j + 1], -e_left), (t00, t11, t01)),
+        ):
+            pos = (w_ab >= 0) & (w_bc >= 0) & (w_ca >= 0)
+            neg = (w_ab <= 0) & (w_bc <= 0) & (w_ca <= 0)
+            w_sum = w_ab + w_bc + w_ca
+            ok = cell_ok & (pos | neg) & (w_sum != 0.0)
+            # Hit point = barycentric mix (weights w_bc, w_ca, w_ab) -> its ray parameter.
+            t = (w_bc * ta + w_ca * tb + w_ab * tc) / jp.where(ok, w_sum, 1.0)
+            ts.append(jp.where(ok & (t >= 0.0) & (t <= max_range_m), t, jp.inf))
+    return ts
 
 
 def _finish(h_flat, hf: Heightfield, o, d, t_tri, g_best, max_range_m: float, with_normal: bool):

@@ -11,6 +11,7 @@ import jax.numpy as jp
 import numpy as np
 
 from foottof import config_check, constants
+from foottof.limits import ENSEMBLE_KNOT, STONE_TYPES  # noqa: F401 (re-exported)
 from foottof.renames import read_added
 
 # The paper's nine types, in order: stage 1 (first five), then the four stage-2 additions.
@@ -26,7 +27,6 @@ TERRAIN_TYPES = (
     "pyramid_down",
 )
 STAGE1_TYPES = TERRAIN_TYPES[:5]
-STONE_TYPES = ("grid_stones", "two_row_stones", "mixed_row_stones")  # stepping-stone types
 PIT_TYPES = ("grid_stones", "two_row_stones", "platform_gap", "mixed_row_stones", "beam")
 
 # Spawn surface height per type: every start platform (and goal region) is flat at z = 0 [m], so
@@ -132,7 +132,6 @@ STONE_CURRICULA = {
 }
 STONE_CURRICULUM_NAMES = tuple(STONE_CURRICULA)  # valid terrain.stone_curriculum values
 DEFAULT_STONE_CURRICULUM = "size_first"
-ENSEMBLE_KNOT = 0.72  # from here on every stone curriculum holds the same values
 # The default curriculum's knots and schedules (earlier code imported these names).
 STONE_KNOTS = STONE_CURRICULA[DEFAULT_STONE_CURRICULUM]["knots"]
 STONE_SCHEDULES = {

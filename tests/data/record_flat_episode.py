@@ -20,7 +20,7 @@ sys.path.insert(0, ROOT)
 
 from configs import flat  # noqa: E402
 from foottof.eval.harness import make_eval_env_and_policy  # noqa: E402
-from foottof.ppo.run_dir import with_run_network  # noqa: E402
+from foottof.ppo.storage.run_dir import with_run_network  # noqa: E402
 
 STEPS = 500
 

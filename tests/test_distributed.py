@@ -601,18 +601,49 @@ def one_process_six(tmp_path_factory):
     return one
 
 
-def _until_both_end(procs: list[subprocess.Popen], timeout: float, then_s: float) -> float:
-    """Waits for the first of `procs` to end (at most `timeout` s), then `then_s` s for the
-    other; returns the seconds between the two ends (the other is killed past then_s)."""
-    deadline, first = time.time() + timeout, None
+def _until_stopped(procs: list[subprocess.Popen], timeout: float, then_s: float):
+    """Waits until every process of `procs` ends: at most `timeout` s, and at most `then_s` s
+    after the first one ended or said why it stops (a line starting `error:` or
+    `[distributed]`); kills any left. Returns their CompletedProcess and the seconds from that
+    first sign to the last end."""
+    import threading
+
+    out = [{"stdout": [], "stderr": []} for _ in procs]
+    first = []  # time of the first sign of a stop
+
+    def read(i, name):
+        for line in getattr(procs[i], name):
+            out[i][name].append(line)
+            if line.startswith(("error:", "[distributed]")):
+                first.append(time.time())
+
+    readers = [
+        threading.Thread(target=read, args=(i, name), daemon=True)
+        for i in range(len(procs))
+        for name in ("stdout", "stderr")
+    ]
+    for t in readers:
+        t.start()
+    deadline = time.time() + timeout
     while any(p.poll() is None for p in procs):
-        now = time.time()
-        if first is None and any(p.poll() is not None for p in procs):
-            first = now
-        if now > (deadline if first is None else first + then_s):
+        if any(p.poll() is not None for p in procs):
+            first.append(time.time())
+        if time.time() > (min(first) + then_s if first else deadline):
             break
         time.sleep(0.05)
-    return time.time() - (first or time.time())
+    last = time.time()
+    for p in procs:
+        p.kill()
+        p.wait()
+    for t in readers:
+        t.join(10)
+    results = [
+        subprocess.CompletedProcess(
+            p.args, p.returncode, "".join(o["stdout"]), "".join(o["stderr"])
+        )
+        for p, o in zip(procs, out, strict=True)
+    ]
+    return results, last - min(first, default=last)
 
 
 @pytest.mark.slow
@@ -636,12 +667,7 @@ def test_disk_full_on_one_process_stops_every_process_in_one_line_and_resumes(
     run = tmp_path / "run"
     cmd = [sys.executable, WORKER, "run", str(run), "6", "2"]
     procs = _start(cmd, 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="10", FOOTTOF_TEST_DISK_FULL=f"{full}:4")
-    try:
-        apart_s = _until_both_end(procs, timeout=600, then_s=30)
-    finally:
-        for p in procs:
-            p.kill()
-        results = [_finish(p, 30) for p in procs]
+    results, stop_s = _until_stopped(procs, timeout=600, then_s=30)
     hit, other = results[full], results[1 - full]
     line = hit.stderr.strip().splitlines()[-1]
     assert hit.returncode == 1, (hit.returncode, hit.stderr[-3000:])
@@ -662,7 +688,7 @@ def test_disk_full_on_one_process_stops_every_process_in_one_line_and_resumes(
     for r in results:  # one line of ours each (orbax logs the failed write before it)
         ours = [x for x in r.stderr.splitlines() if x.startswith(("error:", "[distributed]"))]
         assert len(ours) == 1 and "stack trace" not in r.stderr, r.stderr[-3000:]
-    assert apart_s < 15, apart_s  # measured: under 1 s (the watch reads every 0.5 s here)
+    assert stop_s < 15, stop_s  # measured: under 1 s (the watch reads every 0.5 s here)
     assert run_dirs.latest_checkpoint(str(run)) == 2
     assert integrity.integrity_problem(str(run / "checkpoints" / "2")) is None
     rows = _metrics(run)

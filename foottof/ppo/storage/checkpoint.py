@@ -18,9 +18,10 @@ only. A network with more inputs than the saved one restores it grown
 
 A full disk. A save that fails for want of space raises :class:`foottof.files.DiskFull` (one
 line: the run folder, the space a checkpoint needs and the last complete checkpoint) after
-removing what it wrote of the failed one (orbax's ``<step>.orbax-checkpoint-tmp*`` folder, which
-no restore reads); the checkpoints before it are untouched (orbax deletes old ones only after a
-save completes).
+removing, in a run of one process, what it wrote of the failed one (orbax's
+``<step>.orbax-checkpoint-tmp*`` folder; with several processes it stays, as the others may still
+write into it); no restore reads such a folder, and the checkpoints before it are untouched (orbax
+deletes old ones only after a save completes).
 """
 
 import contextlib

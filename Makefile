@@ -47,8 +47,9 @@ test: $(STAMP) render-deps
 # guarantees (145 s of CPU; 15 min on a crowded 2-core box: bench/NOTES.md item 18), the slow
 # tests of tests/test_distributed.py, each with 2 processes on localhost (2 processes x 1 device
 # equal 1 process x 2 devices through a resume; a killed process stops the run in one line and a
-# resume continues; a hung one ends the others within the heartbeat; train.py checks the env
-# count against both processes' devices); and the GPU check's --dry_run (~4.5 min of MJX
+# resume continues; a hung one ends the others within the heartbeat; a full disk on either
+# process stops both in one line each and a resume continues; train.py checks the env count
+# against both processes' devices); and the GPU check's --dry_run (~4.5 min of MJX
 # compiles on the CPU: tests/test_gpu_check.py). One test at a time (no -n).
 test-integration: $(STAMP)
 	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q tests/test_distributed.py tests/test_gpu_check.py

@@ -1,4 +1,5 @@
-"""LSTM PPO trainer: networks, losses, train (make_train), checkpoint, runner, export, toy_envs.
+"""LSTM trainer: networks, algorithms (PPO, distillation), train (make_train), runner, storage/,
+export, toy_envs.
 
 Nothing is imported here, so `foottof.ppo.export.NumpyPolicy` loads without JAX.
 """

@@ -1,5 +1,8 @@
 """One compiled LSTM-PPO iteration (rollout + update epochs), data-parallel over a 'data' mesh.
 
+The update epochs minimize the algorithm's loss (foottof.ppo.algorithms: PPO, or distillation
+where train.teacher is set), chosen once in make_train; the rest of the iteration is shared.
+
 Env contract (batched, Brax-style): `reset(keys (N, 2)) -> State`,
 `step(state, actions (N, A)) -> State`, auto-reset inside `step`, `State.obs` an (N, obs) array
 or a dict {'state': actor obs, 'privileged_state': critic obs}, `State.reward` (N,),
@@ -29,7 +32,7 @@ from jax.sharding import PartitionSpec as P
 from foottof import config_check
 from foottof.envs.wrappers import VmapEnv, wrap_brax_env  # noqa: F401 (re-exported)
 from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
-from foottof.ppo import distill, losses
+from foottof.ppo import algorithms, losses
 from foottof.ppo import networks as net
 from foottof.ppo import symmetry as sym
 from foottof.renames import read_added
@@ -159,19 +162,13 @@ class Settings:
     desired_kl: float
     lr_min: float
     lr_max: float
-    clip_param: float
-    value_loss_coef: float
-    entropy_coef: float
-    use_clipped_value_loss: bool
-    distilling: bool  # train.teacher set: the imitation loss (foottof.ppo.distill) replaces PPO's
-    reconstruction_weight: float = 0.0  # distillation with a belief decoder (network.reconstruct)
+    algorithm: algorithms.Algorithm  # PPO, or distillation where train.teacher is set
     symmetry: bool = False  # ppo.symmetry: mirrored copies of the sequences join each minibatch
     mirror: Any = None  # with symmetry: the env's mirror maps (foottof.envs.symmetry.Mirror)
 
     @classmethod
     def from_config(cls, cfg: ml_collections.ConfigDict) -> "Settings":
         ppo = cfg.ppo
-        train_cfg = cfg.get("train", None)
         return cls(
             num_steps=int(ppo.num_steps),
             num_minibatches=int(ppo.num_minibatches),
@@ -183,22 +180,8 @@ class Settings:
             desired_kl=float(ppo.desired_kl),
             lr_min=float(ppo.lr_min),
             lr_max=float(ppo.lr_max),
-            clip_param=float(ppo.clip_param),
-            value_loss_coef=float(ppo.value_loss_coef),
-            entropy_coef=float(ppo.entropy_coef),
-            use_clipped_value_loss=bool(ppo.use_clipped_value_loss),
-            distilling=bool(train_cfg is not None and read_added(train_cfg, "train.teacher")),
-            reconstruction_weight=float(read_added(ppo, "ppo.reconstruction_weight")),
+            algorithm=algorithms.from_config(cfg),
             symmetry=bool(read_added(ppo, "ppo.symmetry")),
-        )
-
-    def loss_kwargs(self) -> dict:
-        """The keyword arguments of losses.ppo_loss."""
-        return dict(
-            clip_param=self.clip_param,
-            value_loss_coef=self.value_loss_coef,
-            entropy_coef=self.entropy_coef,
-            use_clipped_value_loss=self.use_clipped_value_loss,
         )
 
 
@@ -329,18 +312,12 @@ def sgd_step(networks: net.Networks, optimizer, settings: Settings, carry, mb: l
       step used) and 'ppo/grad_norm').
     """
     params, opt_state, normalizer = carry
-    loss_kwargs = settings.loss_kwargs()
+    loss_kwargs = {}
     if settings.symmetry:  # static: the mirrored copies of the minibatch's sequences join it
         loss_kwargs["kl_envs"] = mb.advantages.shape[1]  # the KL over the originals (rsl_rl)
         mb = sym.augment(mb, settings.mirror)
-    if settings.distilling:  # static
-        grad_fn = jax.value_and_grad(distill.distill_loss, has_aux=True)
-        (_, metrics), grads = grad_fn(
-            params, networks, normalizer, mb, settings.reconstruction_weight
-        )
-    else:
-        grad_fn = jax.value_and_grad(losses.ppo_loss, has_aux=True)
-        (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
+    grad_fn = jax.value_and_grad(settings.algorithm.loss, has_aux=True)
+    (_, metrics), grads = grad_fn(params, networks, normalizer, mb, **loss_kwargs)
     grads = jax.lax.pmean(grads, AXIS)
     metrics = jax.lax.pmean(metrics, AXIS)
     if settings.adaptive_lr:

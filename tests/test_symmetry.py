@@ -35,7 +35,7 @@ def _user_configs():
 @pytest.mark.parametrize("name", _user_configs())
 def test_every_shipped_layout_has_self_inverse_signed_permutations(name):
     """Each config's maps cover its observation sizes (4 sensors x 16 zones: actor 181, + 153
-    or 306 teacher inputs; critic 223, + 171 scan) and are signed permutations with
+    or 306 teacher inputs, + 372 fine ones; critic 223, + 171 scan) and are signed permutations with
     mirror(mirror(x)) == x; the student's view of a teacher's inputs mirrors among itself."""
     cfg = importlib.import_module(name).get_config()
     m = sym.make_mirror(cfg)
@@ -43,6 +43,8 @@ def test_every_shipped_layout_has_self_inverse_signed_permutations(name):
     actor = 2 * f * z + f + 49
     if cfg.env.get("actor_terrain", False):
         actor += obs_lib.actor_terrain_size(bool(cfg.env.get("actor_terrain_seen", False)))
+    if cfg.env.get("actor_terrain_fine", False):
+        actor += 372  # the 5 cm points between the 10 cm ones (envs.fine_terrain)
     critic = 2 * f * z + f + 49 + 36 + 4 + 2 + (171 if cfg.env.get("critic_height_scan") else 0)
     assert m.obs["state"].size == actor and m.obs["privileged_state"].size == critic
     x = {

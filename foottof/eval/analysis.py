@@ -10,7 +10,7 @@ import jax.numpy as jp
 import numpy as np
 
 from foottof.eval.harness import make_eval_env_and_policy, perturbed_reset
-from foottof.eval.results import write_atomic
+from foottof.files import write_atomic
 from foottof.robot import kinematics
 from foottof.sensors import tof
 

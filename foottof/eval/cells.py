@@ -21,7 +21,8 @@ import os
 
 import numpy as np
 
-from foottof.eval.results import EPISODE_KEYS, RESULT_KEYS, write_atomic
+from foottof.eval.results import EPISODE_KEYS, RESULT_KEYS
+from foottof.files import write_atomic
 
 CELLS_SUBDIR = "cells"
 CELL_SCHEMA_VERSION = 1

@@ -25,11 +25,12 @@ from __future__ import annotations
 import argparse
 import csv
 import glob
+import io
 import json
 import math
 import os
 
-from foottof import renames
+from foottof import files, renames
 from foottof.eval import results
 
 PAIRED_KEYS = (  # CSV columns of --out
@@ -296,11 +297,11 @@ def main(argv=None) -> None:
         raise SystemExit(f"error: {e}") from None
     print(format_table(rows, names))
     if args.out:
-        with open(args.out + ".tmp", "w", newline="") as f:
-            w = csv.DictWriter(f, fieldnames=PAIRED_KEYS, lineterminator="\n")
-            w.writeheader()
-            w.writerows(rows)
-        os.replace(args.out + ".tmp", args.out)
+        f = io.StringIO(newline="")
+        w = csv.DictWriter(f, fieldnames=PAIRED_KEYS, lineterminator="\n")
+        w.writeheader()
+        w.writerows(rows)
+        files.write_atomic({args.out: f.getvalue().encode()})
         print(f"[paired] wrote {args.out}")
 
 

@@ -13,7 +13,7 @@ import os
 import numpy as np
 
 from foottof import renames
-from foottof.files import write_atomic  # noqa: F401  (re-exported: cells, analysis, teacher)
+from foottof.files import write_atomic
 
 SCHEMA_VERSION = 4  # 2: adds "ensemble" (difficulty, stone share, actions); 3: mean_speed_mps;
 # 4: the ensemble records the action std cap of sampled actions (older files: migrate_ensemble)

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 import math
 import os
 
 import numpy as np
 
+from foottof import files
 from foottof.eval.paired import parse_branch  # noqa: F401 (NAME=RUN_DIR, re-exported)
 from foottof.lab.curves import read_metrics
 
@@ -89,18 +91,17 @@ def markdown_table(result: list[dict], first: int, last: int) -> str:
 def write_rows(result: list[dict], path: str) -> None:
     """One CSV with the per-iteration rows of every branch (written atomically)."""
     cols = ["iteration", "env_steps"] + [c for c, _ in COLUMNS]
-    tmp = path + ".tmp"
-    with open(tmp, "w", newline="") as f:
-        w = csv.writer(f)
-        w.writerow(["branch"] + cols)
-        for r in result:
-            n, rows = r["n"], r["rows"]
-            its = rows["iteration"].astype(np.int64)
-            steps = rows["env_steps"].astype(np.int64)
-            vals = [rows.get(c, np.full(n, math.nan)) for c, _ in COLUMNS]
-            for i in range(n):
-                w.writerow([r["name"], its[i], steps[i]] + [repr(float(v[i])) for v in vals])
-    os.replace(tmp, path)
+    f = io.StringIO(newline="")
+    w = csv.writer(f)
+    w.writerow(["branch"] + cols)
+    for r in result:
+        n, rows = r["n"], r["rows"]
+        its = rows["iteration"].astype(np.int64)
+        steps = rows["env_steps"].astype(np.int64)
+        vals = [rows.get(c, np.full(n, math.nan)) for c, _ in COLUMNS]
+        for i in range(n):
+            w.writerow([r["name"], its[i], steps[i]] + [repr(float(v[i])) for v in vals])
+    files.write_atomic({path: f.getvalue().encode()})
 
 
 def main(argv=None) -> None:

@@ -15,7 +15,7 @@ import os
 
 import numpy as np
 
-from foottof import renames
+from foottof import files, renames
 
 # (column in metrics.csv, label of the curve). Per-episode means are over the episodes that ended
 # in the iteration; 'task/speed_mps' is the mean horizontal base speed over all steps.
@@ -107,10 +107,7 @@ def curve_png(curve: dict[str, np.ndarray], title: str = "") -> bytes:
 
 
 def _atomic_write(path: str, data: bytes) -> None:
-    tmp = path + ".tmp"
-    with open(tmp, "wb") as f:
-        f.write(data)
-    os.replace(tmp, path)
+    files.write_atomic({path: data})
 
 
 def write_curve(run_dir: str, window: int = 20, out_prefix: str | None = None) -> tuple[str, str]:

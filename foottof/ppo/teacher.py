@@ -111,7 +111,7 @@ def check_teacher_record(
       ValueError: one message naming both teachers (path, step, fingerprint) and the two ways on,
         when a resumed run's teacher differs from its record and ``change_ok`` is False.
     """
-    from foottof.eval.results import write_atomic
+    from foottof.files import write_atomic
     from foottof.ppo import run_dir as run_dirs
 
     step = ckpt.checkpoint_location(path)[1] if os.path.isdir(path) else None

@@ -112,8 +112,9 @@ def test_old_override_names_the_new_field(script):
         ("flat", "flat.py"),
         ("teacher", "teacher_cpu.py"),
         ("teacher_stones", "experiments/teacher_stones_cpu.py"),  # the line in training
+        ("teacher_fine", "experiments/teacher_fine_cpu.py"),  # its A/B arm (5 cm inputs)
     ],
-    ids=["stage1", "flat", "teacher", "teacher_stones"],
+    ids=["stage1", "flat", "teacher", "teacher_stones", "teacher_fine"],
 )
 def test_shipped_policies_fit_this_code_for_resume(policy, config):
     """Every leaf of the shipped checkpoint fits the TrainState this code builds from the run's

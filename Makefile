@@ -41,7 +41,7 @@ wheels: $(STAMP)
 # Fast suite (what CI runs): everything not marked slow, plus lint.
 test: $(STAMP) render-deps
 	$(VENV)/bin/ruff check .
-	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 --dist loadfile --no-loadscope-reorder -q
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 --dist loadfile --no-loadscope-reorder -q --durations=20
 
 # What CI runs after `make test`, kept out of the fast suite by their length: the multi-process
 # guarantees (145 s of CPU; 15 min on a crowded 2-core box: bench/NOTES.md item 18), the slow

@@ -522,24 +522,30 @@ def test_a_process_that_never_joins_stops_the_start_up_in_one_line(tmp_path):
     assert not os.path.exists(tmp_path / "run")
 
 
-def test_a_process_lost_during_the_first_compile_stops_the_others_in_one_line():
-    """2 processes past start-up, then without a collective for minutes (as in a first compile):
-    process 1 is killed. Process 0 stops within the heartbeat timeout (6 s here) with one line
-    and EXIT_PROCESS_LOST (its own heartbeats, foottof.ppo.distributed.PeerWatch, notice at half
-    the timeout), not JAX's abort and stack dump at the full timeout."""
+def _kill_one_while_stalled(killed: int):
+    """2 "stall" workers (heartbeat timeout 6 s) past start-up; process ``killed`` gets SIGKILL.
+    Returns (the other one's finished result, seconds from the kill to its exit)."""
     procs = _start([sys.executable, WORKER, "stall"], 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="6")
     try:
         for p in procs:
             line = p.stdout.readline()
             assert line.startswith("[worker] started"), _finish(p, 30).stderr[-3000:]
-        procs[1].send_signal(signal.SIGKILL)
-        killed = time.time()
-        r = _finish(procs[0], timeout=60)
-        stop_s = time.time() - killed
+        procs[killed].send_signal(signal.SIGKILL)
+        t0 = time.time()
+        r = _finish(procs[1 - killed], timeout=60)
+        return r, time.time() - t0
     finally:
         for p in procs:
             p.kill()
             p.communicate()
+
+
+def test_a_process_lost_during_the_first_compile_stops_the_others_in_one_line():
+    """2 processes past start-up, then without a collective for minutes (as in a first compile):
+    process 1 is killed. Process 0 stops within the heartbeat timeout (6 s here) with one line
+    and EXIT_PROCESS_LOST (its own heartbeats, foottof.ppo.distributed.PeerWatch, notice at half
+    the timeout), not JAX's abort and stack dump at the full timeout."""
+    r, stop_s = _kill_one_while_stalled(killed=1)
     assert r.returncode == distributed.EXIT_PROCESS_LOST, (r.returncode, r.stderr[-3000:])
     assert r.stderr.strip().splitlines()[-1] == (
         "[distributed] process 1 of 2 sent no heartbeat for 3 s (killed, hung or its host gone); "
@@ -556,19 +562,7 @@ def test_the_coordinator_lost_during_the_first_compile_stops_the_others_in_one_l
     SIGABRT. Process 1 must stop instead with one line naming process 0 as the coordinator that
     is gone, and EXIT_PROCESS_LOST, within the heartbeat timeout; before it only the runtime's
     own log lines (warnings and errors of its RPCs, not its fatal one)."""
-    procs = _start([sys.executable, WORKER, "stall"], 2, FOOTTOF_HEARTBEAT_TIMEOUT_S="6")
-    try:
-        for p in procs:
-            line = p.stdout.readline()
-            assert line.startswith("[worker] started"), _finish(p, 30).stderr[-3000:]
-        procs[0].send_signal(signal.SIGKILL)
-        killed = time.time()
-        r = _finish(procs[1], timeout=60)
-        stop_s = time.time() - killed
-    finally:
-        for p in procs:
-            p.kill()
-            p.communicate()
+    r, stop_s = _kill_one_while_stalled(killed=0)
     assert r.returncode == distributed.EXIT_PROCESS_LOST, (r.returncode, r.stderr[-3000:])
     *before, last = r.stderr.strip().splitlines()
     assert re.fullmatch(

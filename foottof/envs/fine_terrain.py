@@ -26,7 +26,6 @@ import jax.numpy as jp
 import numpy as np
 
 from foottof.envs import observations as obs_lib
-from foottof.robot import kinematics
 
 STEP_M = 0.05  # the fine grid's spacing
 _PATCH_AXIS = np.round(np.arange(-2, 3) * STEP_M, 4)  # -0.1 .. 0.1 (5)
@@ -61,16 +60,9 @@ def fine_terrain(height_at, foot_pos: jax.Array, base_pos: jax.Array, base_quat:
     """
     patch_pts = foot_pos[:, None, :2] + jp.asarray(PATCH_OFFSETS)[None]  # (4, 16, 2)
     patches = height_at(patch_pts) - foot_pos[:, None, 2]
-    scan = height_at(world_points(jp.asarray(SCAN_POINTS), base_pos, base_quat)) - base_pos[2]
+    scan_xy = obs_lib.base_yaw_to_world(jp.asarray(SCAN_POINTS), base_pos, base_quat)
+    scan = height_at(scan_xy) - base_pos[2]
     return jp.clip(jp.concatenate([patches.reshape(-1), scan]), -1.0, 1.0)
-
-
-def world_points(points: jax.Array, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
-    """(P, 2) world x, y of base-yaw-frame points (as observations.world_scan_points)."""
-    fwd = kinematics.quat_to_mat(base_quat)[:2, 0]
-    fwd = fwd / jp.maximum(jp.linalg.norm(fwd), 1e-6)
-    rot = jp.array([[fwd[0], -fwd[1]], [fwd[1], fwd[0]]])
-    return base_pos[None, 0:2] + points @ rot.T
 
 
 def coarse_sources() -> np.ndarray:

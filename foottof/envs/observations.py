@@ -99,10 +99,16 @@ def foot_patch_points(foot_pos: jax.Array) -> jax.Array:
 
 def world_scan_points(base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
     """(P, 2) world x, y of :func:`critic_scan_points`, turned with the base's heading (yaw)."""
+    return base_yaw_to_world(critic_scan_points(), base_pos, base_quat)
+
+
+def base_yaw_to_world(points: jax.Array, base_pos: jax.Array, base_quat: jax.Array) -> jax.Array:
+    """(P, 2) world x, y of base-yaw-frame points (P, 2): turned with the base's heading (yaw
+    only), then shifted to the base's x, y."""
     fwd = kinematics.quat_to_mat(base_quat)[:2, 0]  # base x axis, horizontal part
     fwd = fwd / jp.maximum(jp.linalg.norm(fwd), 1e-6)
     rot = jp.array([[fwd[0], -fwd[1]], [fwd[1], fwd[0]]])  # yaw rotation
-    return base_pos[None, 0:2] + critic_scan_points() @ rot.T
+    return base_pos[None, 0:2] + points @ rot.T
 
 
 def critic_scan_points() -> jax.Array:

@@ -134,6 +134,26 @@ def test_a_command_line_action_std_cap_outlives_the_runs_network(tmp_path):
         rd.with_run_network(cfg, ckpt, {"env.actor_terrain"})
 
 
+def test_a_policy_evaluated_with_a_stock_config_reads_the_terrain_inputs_its_run_read(tmp_path):
+    """evaluate.py --config configs/stage1_cpu.py --checkpoint policies/teacher_fine: every env
+    field that shapes the actor's inputs comes from the run (the 5 cm block among them, 372 more
+    inputs); a run saved before a field existed gets its old default (off)."""
+    from configs import stage1_cpu
+
+    cfg = stage1_cpu.get_config()
+    assert not cfg.env.actor_terrain and not cfg.env.actor_terrain_fine
+    fine = rd.with_run_network(
+        cfg, _run_with_config(tmp_path, {}, {"actor_terrain": True, "actor_terrain_fine": True})
+    )
+    assert fine.env.actor_terrain and fine.env.actor_terrain_fine
+    assert not fine.env.actor_terrain_seen and not fine.env.critic_height_scan
+    old = tmp_path / "old"
+    old.mkdir()
+    cfg.env.actor_terrain_fine = True
+    before = rd.with_run_network(cfg, _run_with_config(old, {}, {"actor_terrain": True}))
+    assert before.env.actor_terrain and not before.env.actor_terrain_fine
+
+
 def test_a_run_keeps_its_stone_curriculum_unless_the_command_line_sets_one(tmp_path):
     """A resumed or evaluated run takes terrain.stone_curriculum from its config.json; one saved
     before the field existed trained gaps-first; a command-line value wins; the caller's config

@@ -167,7 +167,12 @@ def run_config_path(checkpoint: str) -> str | None:
 
 
 # Env fields that shape the network's inputs: taken from the run config along with c.network.
-RUN_INPUT_FIELDS = ("critic_height_scan", "actor_terrain", "actor_terrain_seen")
+RUN_INPUT_FIELDS = (
+    "critic_height_scan",
+    "actor_terrain",
+    "actor_terrain_seen",
+    "actor_terrain_fine",
+)
 
 
 # Network fields that do not shape the parameters: a command-line value may differ from the run's.

@@ -24,7 +24,8 @@ from foottof.ppo import train as train_lib  # noqa: E402
 
 def _factory(spec: str):
     if spec == "memory":
-        from foottof.ppo import toy_envs
+        sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "tests"))
+        import toy_envs  # the tests' cue-recall memory env
 
         return toy_envs.make_memory_env
     module, _, name = spec.partition(":")

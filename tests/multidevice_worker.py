@@ -81,8 +81,8 @@ def _behaviour_batch(trainer, env, state, key, num_steps: int):
 def update(out: str) -> None:
     import jax
     import numpy as np
+    import toy_envs
 
-    from foottof.ppo import toy_envs
     from foottof.ppo import train as train_lib
 
     assert jax.device_count() >= 2, jax.devices()
@@ -129,10 +129,11 @@ def run(out_dir: str, iterations: str = "3", every: str = "1", resume: bool = Fa
     setup = distributed.initialize()  # before any other JAX call
     import jax
     import numpy as np
+    import toy_envs
     from helpers import tiny_cfg
 
     from foottof import files
-    from foottof.ppo import runner, toy_envs
+    from foottof.ppo import runner
 
     if full := os.environ.get(DISK_FULL_VAR):
         process, step = full.split(":")

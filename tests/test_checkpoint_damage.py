@@ -7,10 +7,11 @@ import shutil
 
 import jax
 import pytest
+import toy_envs
 from helpers import REPO, run_cli, tiny_cfg, tree_equal
 
 from foottof.ppo import checkpoint as ckpt
-from foottof.ppo import integrity, runner, toy_envs
+from foottof.ppo import integrity, runner
 
 ENV = toy_envs.make_memory_env()
 

@@ -319,7 +319,8 @@ def test_each_rule_runs_once_on_the_train_path(monkeypatch):
     section and make_networks the network section, as a library caller needs: a rule that passed
     for a value is not run again (each section is checked once a command), and one that fails
     fails every time."""
-    from foottof.ppo import toy_envs
+    import toy_envs
+
     from foottof.ppo import train as train_lib
 
     monkeypatch.setattr(cc, "_PASSED", set())

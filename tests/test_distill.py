@@ -7,9 +7,10 @@ import jax
 import jax.numpy as jp
 import numpy as np
 import pytest
+import toy_envs
 from helpers import small_cfg, tiny_cfg, tree_equal
 
-from foottof.ppo import distill, export, runner, teacher, toy_envs
+from foottof.ppo import distill, export, runner, teacher
 from foottof.ppo import train as train_lib
 
 EPISODE = 8  # steps; steps 1..7 are rewarded

@@ -10,11 +10,12 @@ import sys
 import time
 
 import pytest
+import toy_envs
 from etils import epath
 from helpers import REPO, run_cli, tiny_cfg, tree_equal
 
 from foottof import files
-from foottof.ppo import integrity, runner, toy_envs
+from foottof.ppo import integrity, runner
 
 ENV = toy_envs.make_memory_env()
 

@@ -9,11 +9,12 @@ import jax
 import jax.numpy as jp
 import numpy as np
 import pytest
+import toy_envs
 from brax.envs.base import State
 from helpers import small_cfg, tiny_cfg, tree_equal
 
 from configs import _ppo
-from foottof.ppo import export, losses, runner, toy_envs
+from foottof.ppo import export, losses, runner
 from foottof.ppo import networks as net
 from foottof.ppo import train as train_lib
 from foottof.ppo.storage import checkpoint as ckpt

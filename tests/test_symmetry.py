@@ -9,13 +9,14 @@ import jax
 import jax.numpy as jp
 import numpy as np
 import pytest
+import toy_envs
 from helpers import REPO, small_cfg, tree_equal
 
 from configs import smoke
 from foottof.envs import make_training_env
 from foottof.envs import observations as obs_lib
 from foottof.envs import symmetry as sym
-from foottof.ppo import distill, losses, toy_envs
+from foottof.ppo import distill, losses
 from foottof.ppo import symmetry as ppo_sym
 from foottof.ppo import train as train_lib
 from foottof.ppo.storage import checkpoint as ckpt

@@ -41,7 +41,7 @@ wheels: $(STAMP)
 # Fast suite (what CI runs): everything not marked slow, plus lint.
 test: $(STAMP) render-deps
 	$(VENV)/bin/ruff check .
-	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow" -n 2 --dist loadfile --no-loadscope-reorder -q --durations=20
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m "not slow and not integration" -n 2 --dist loadfile --no-loadscope-reorder -q --durations=20
 
 # What CI runs after `make test`, kept out of the fast suite by their length: the multi-process
 # guarantees (145 s of CPU; 15 min on a crowded 2-core box: bench/NOTES.md item 18), the slow
@@ -50,12 +50,16 @@ test: $(STAMP) render-deps
 # resume continues; a hung one ends the others within the heartbeat; a full disk on either
 # process stops both in one line each and a resume continues; train.py checks the env count
 # against both processes' devices); and the GPU check's --dry_run (~4.5 min of MJX
-# compiles on the CPU: tests/test_gpu_check.py). One test at a time (no -n).
+# compiles on the CPU: tests/test_gpu_check.py), one test at a time (no -n). Before them, the
+# single-process tests of over ~30 s each that keep the fast suite within 12 minutes (marked
+# integration: a learning-rate resume, a wider head, the teacher pinning, long guidance and
+# failure rollouts, bench/NOTES.md item 20), two at a time.
 test-integration: $(STAMP)
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m integration -n 2 --dist loadfile -q
 	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q tests/test_distributed.py tests/test_gpu_check.py
 
 test-slow: $(STAMP)
-	JAX_PLATFORMS=cpu $(PY) -m pytest -m slow -q
+	JAX_PLATFORMS=cpu $(PY) -m pytest -m "slow or integration" -q
 
 lint: $(STAMP)
 	$(VENV)/bin/ruff check .

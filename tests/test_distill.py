@@ -248,6 +248,7 @@ def test_belief_decoder_learns_the_privileged_input_the_student_remembers(teache
     assert tree_equal(params["params"]["actor"], tstate.params["params"]["actor"])
 
 
+@pytest.mark.integration
 def test_resumed_student_refuses_a_teacher_that_trained_on(tmp_path):
     """teacher.json pins the teacher of a distillation run: a resume whose train.teacher folder
     now holds a later checkpoint is one clear error; the pinned checkpoint, or
@@ -280,6 +281,7 @@ def test_resumed_student_refuses_a_teacher_that_trained_on(tmp_path):
     assert json.loads((tmp_path / "s" / "teacher.json").read_text()) == moved
 
 
+@pytest.mark.integration
 def test_runner_pins_the_teacher_and_a_failed_new_run_leaves_no_folder(tmp_path):
     """runner.run itself records teacher.json for a TeacherEnv (train.py and a notebook alike)
     and refuses a resume that steps with another teacher; a new run that fails before its first

@@ -887,6 +887,7 @@ class _Bar:
         self.updates.append(n)
 
 
+@pytest.mark.integration
 def test_progress_moves_within_a_batch_and_leaves_the_outcomes_alone():
     """With a progress bar the sweep advances it as the steps of each batch run (8 episodes in 2
     batches of 4 envs x 25 steps: an episode per 25 / 4 steps, not one move per batch), and its

@@ -370,6 +370,7 @@ def test_start_step_hand_worked():
     assert text == "time to progress 0.1, median: success 2.0 s (0 never), timeout 5.0 s (1 never)"
 
 
+@pytest.mark.integration
 def test_failures_on_the_training_map_cover_every_column_type():
     """foottof.eval.failures.run with training_level: the stage-2 training map of the config
     (not the evaluation ensemble), env i on column i; the column types come from

@@ -426,6 +426,7 @@ def test_resume_into_obs_skip_heads_keeps_the_policy_and_grows_zero_rows(
     _assert_same_policy(trainer, saved, skip_trainer, restored)
 
 
+@pytest.mark.integration
 def test_resume_into_a_wider_actor_head_keeps_the_policy_and_the_new_units_learn(tmp_path, capsys):
     """A checkpoint whose actor head is (8, 6) resumes into obs_skip heads with an actor head of
     (16, 12) (input_growth.grow_width): saved blocks as saved, the new units' incoming weights
@@ -694,6 +695,7 @@ def test_toy_env_contract():
     assert np.all(s.obs[:, 1] == 1)  # auto-reset: first-step flag of a new episode
 
 
+@pytest.mark.integration
 def test_resume_with_a_fixed_rate_learns_at_the_configs_rate(tmp_path):
     """A branch resumed with another fixed ppo.learning_rate uses it (the checkpoint's optimizer
     state holds the saved rate); an adaptive rate carries on from where it was saved."""

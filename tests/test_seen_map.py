@@ -114,6 +114,7 @@ def _oracle_cells(env, qpos, origin) -> set:
     return cells
 
 
+@pytest.mark.integration
 def test_seen_cells_are_mujoco_ray_hits_and_the_teacher_reads_heights_only_there():
     """Walking with random actions beside a plain teacher's env (same draws):
 

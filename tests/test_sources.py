@@ -452,6 +452,7 @@ def test_joint_offset_moves_mock_readings_only():
     assert np.mean(diff) > 0.02 and np.mean(diff > 0.01) > 0.5
 
 
+@pytest.mark.integration
 def test_shank_scale_changes_physics_not_the_kinematic_model():
     """The shank_length perturbation (x1.2) scales the *physics* model: MuJoCo C puts its feet and
     ToF sites 20 % further along the shank, so the env's tof readings (true sensor poses) change;

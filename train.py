@@ -6,7 +6,7 @@ import sys
 from absl import app, flags, logging
 from ml_collections import config_flags
 
-from foottof.renames import old_override, read_added  # imports no JAX
+from foottof.renames import old_override  # imports no JAX
 
 # A renamed field (e.g. --config.reward.stall_speed_ms): one line with its new name. Checked before
 # DEFINE_config_file, which applies the --config.* overrides as it is defined.
@@ -86,7 +86,7 @@ def main(argv):
 
     try:
         init_params = None
-        if read_added(t, "train.teacher"):  # distillation: the teacher's env and the student's init
+        if t.teacher:  # distillation: the teacher's env and the student's init
             from foottof.ppo import teacher
 
             env, init_params = teacher.make_distill_env(cfg)  # runner.run records it

@@ -8,6 +8,8 @@ now (CHANGELOG.md, 2026-12-02, third round).
 
 from __future__ import annotations
 
+import json
+
 # Config fields: old dotted path -> new dotted path.
 CONFIG_FIELDS = {
     "env.randomization.push_vel_ms": "env.randomization.push_vel_mps",
@@ -20,8 +22,9 @@ METRICS = {
     "task/speed_ms": "task/speed_mps",
 }
 # Config fields added after evaluations were made, with the default that reproduces the older
-# behaviour: draw fingerprints leave them out at that default (legacy_config_dict), so evaluations
-# from before the field existed still pair with ones made after.
+# behaviour: a run config saved before one existed is migrated to it once, when it is read
+# (read_saved_config), and draw fingerprints leave them out at that default (legacy_config_dict),
+# so evaluations from before the field existed still pair with ones made after.
 ADDED_FIELDS = {
     "network.obs_skip": False,  # off: the heads read the LSTM output only
     "network.reconstruct": 0,  # no belief decoder
@@ -74,7 +77,7 @@ _REMOVED_DEPENDS = {
 }
 # Added fields that were already in the configs of the evaluations kept (results/): draw
 # fingerprints hash them at every value, as those evaluations did; ADDED_FIELDS gives only the
-# fallback of run configs saved before they existed.
+# value that run configs saved before they existed are migrated to.
 HASHED_AT_DEFAULT = frozenset(
     {
         "env.critic_height_scan",
@@ -88,30 +91,41 @@ HASHED_AT_DEFAULT = frozenset(
 
 
 def added_default(field: str):
-    """The old-behaviour default of an ADDED_FIELDS entry (dotted path): what code reading a
-    config saved before the field existed falls back to, so that fallback is written once."""
+    """The old-behaviour default of an ADDED_FIELDS entry (dotted path): what a config saved
+    before the field existed is migrated to (migrate_config_dict), so that default is written
+    once."""
     if field not in ADDED_FIELDS:
         raise KeyError(f"{field!r} is not an added field; added fields: {sorted(ADDED_FIELDS)}")
     return ADDED_FIELDS[field]
-
-
-def read_added(section, field: str):
-    """The value of ADDED_FIELDS entry ``field`` (dotted path) in ``section``, the config section
-    (ConfigDict or dict) that holds it, or its old-behaviour default where a config saved before
-    the field existed lacks it: every such fallback goes through here.
-
-    Example: ``read_added(cfg.terrain, "terrain.stone_curriculum")``."""
-    return section.get(field.rsplit(".", 1)[-1], added_default(field))
 
 
 # Evaluation result rows (results_*.json/csv) and per-episode outcomes (episodes_*.json).
 RESULT_KEYS = {"mean_speed_ms": "mean_speed_mps"}
 
 
+def read_saved_config(path: str) -> dict:
+    """The saved run config at ``path`` (a run's config.json), migrated (migrate_config_dict):
+    the one reader of saved run configs, so the code that reads one reads every field directly.
+
+    Raises:
+      ValueError: as migrate_config_dict (a removed field set away from its default).
+    """
+    with open(path) as f:
+        return migrate_config_dict(json.load(f))
+
+
 def migrate_config_dict(saved: dict) -> dict:
-    """A saved run config (the nested dict of config.json) with renamed fields moved to their
-    new names (a copy; a field present under both names keeps the new one) and removed fields
-    (REMOVED_FIELDS) dropped.
+    """A saved run config (the nested dict of config.json) as today's code reads it (a copy):
+    renamed fields moved to their new names (a field present under both names keeps the new
+    one), removed fields (REMOVED_FIELDS) dropped, and added fields (ADDED_FIELDS) the run was
+    saved without filled in at their old-behaviour default.
+
+    An added field is filled in only where the dict holding it is there (``env`` for
+    ``env.physics``, ``reward.scales`` for ``reward.scales.task``): a section the saved dict
+    lacks is not created. Its readers tell a run that says nothing about a section from one that
+    does by the section's presence (run_dir.with_run_network takes c.network from a run only
+    where it has one, with_run_curriculum the terrain likewise, the runner compares sections),
+    so a section made of defaults alone would stand in for settings the run never had.
 
     Raises:
       ValueError: one line naming a removed field the run set away from its default (and the
@@ -136,6 +150,11 @@ def migrate_config_dict(saved: dict) -> dict:
                 f"default {REMOVED_FIELDS[field]!r} is today's behaviour): this code cannot "
                 f"resume or reproduce that run; the code at git commit {REMOVED_AT} can"
             )
+    for field, default in ADDED_FIELDS.items():
+        *path, leaf = field.split(".")
+        parent = _walk(out, path)
+        if parent is not None:
+            parent.setdefault(leaf, default)
     return out
 
 

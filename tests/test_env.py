@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from configs import smoke, teacher_cpu
-from foottof import constants
+from foottof import constants, renames
 from foottof.envs import make_env
 from foottof.envs import rewards as rw
 from foottof.envs.terminations import FAIL_REASONS
@@ -91,6 +91,7 @@ def test_shapes_and_no_nan_on_every_terrain(env, fns, on_columns):
     assert dones > 0  # random actions end episodes (falls) and they auto-reset
 
 
+@pytest.mark.integration
 def test_reset_perturbed_replaces_only_the_perturbation(env, fns, reset_perturbed):
     """Evaluation hook: the same draws as reset(), with the joint-reading offset and odometry level
     replaced. Actor obs layout: readings (F*Z), validity (F*Z), frame age (F), joint positions
@@ -398,11 +399,14 @@ def test_overspeed_term_hand_checked():
     x = _inputs(base_lin_vel=jp.array([0.6, 0.8, 0.0]))
     scaled = rw.scaled_terms(rw.compute_terms(x, _spec(r), 0.02), r.scales, 0.02)
     assert float(scaled["overspeed"]) == pytest.approx(-0.016)
-    # A config saved before the term existed reads it as off.
-    del r.scales["overspeed"]
-    assert rw.RewardSpec.from_config(r).scale("overspeed") == 0.0
+    # A config saved before the term existed reads it as off (read migrated, foottof.renames).
+    saved = r.to_dict()
+    del saved["scales"]["overspeed"]
+    old = ml_collections.ConfigDict(renames.migrate_config_dict({"reward": saved})["reward"])
+    assert rw.RewardSpec.from_config(old).scale("overspeed") == 0.0
 
 
+@pytest.mark.integration
 def test_guidance_weight_counts_training_steps_across_resets(env):
     """The env's step counter (info['env_steps']) survives auto-resets and sets the bias weight:
     decay over iterations 0-2 at 2 steps per iteration, 3-step episodes."""
@@ -462,9 +466,13 @@ def test_guidance_weight_schedule():
 
 
 def test_reward_scales_added_terms_default_off():
-    # A config saved before the task term existed: check_scales accepts it, the term scales to 0.
-    scales = dict(_cfg().reward.scales)
-    del scales["task"]
+    # A config saved before the task term existed, read migrated (foottof.renames): the term
+    # scales to 0. Unmigrated, it lacks a term the env reads.
+    saved = _cfg().reward.to_dict()
+    del saved["scales"]["task"]
+    with pytest.raises(ValueError, match="missing term.*task"):
+        rw.check_scales(saved["scales"])
+    scales = renames.migrate_config_dict({"reward": saved})["reward"]["scales"]
     rw.check_scales(scales)
     ones = {k: jp.asarray(1.0) for k in rw.REWARD_TERMS}
     assert float(rw.scaled_terms(ones, ml_collections.ConfigDict(scales), 0.02)["task"]) == 0.0
@@ -472,7 +480,7 @@ def test_reward_scales_added_terms_default_off():
     tenth = rw.scaled_terms(ones, ml_collections.ConfigDict(scales), 0.02, 0.1)
     assert float(tenth["reach"]) == pytest.approx(0.1 * scales["reach"])
     assert float(tenth["torques"]) == pytest.approx(0.1 * 0.02 * scales["torques"])
-    del scales["reach"]  # not an added term: still an error
+    del scales["reach"]  # a term missing: an error
     with pytest.raises(ValueError, match="missing term.*reach"):
         rw.check_scales(scales)
 

@@ -53,7 +53,7 @@ def test_shipped_run_config_migrates_to_the_current_field_names():
         assert _keys(migrated[section]) <= _keys(current[section])
     assert not _keys(saved["reward"]) <= _keys(current["reward"])  # (not before the migration)
     assert _leaf(saved, "reward.stall_speed_ms") == 0.1  # the migration copied, not moved
-    assert renames.migrate_config_dict({"reward": {}}) == {"reward": {}}
+    assert "stall_speed_mps" not in renames.migrate_config_dict({"reward": {}})["reward"]
 
 
 def _keys(d, prefix=""):
@@ -195,10 +195,10 @@ def test_ensemble_evaluations_pair_across_the_stone_curricula():
     assert len(prints) == 2
 
 
-def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
-    """A run config saved before the ADDED_FIELDS existed (the fields deleted) builds the same
-    TaskSpec, reward terms and network as one holding them at their old-behaviour defaults: the
-    fallbacks are renames.added_default, written once."""
+def test_configs_saved_before_an_added_field_read_its_old_behaviour_default(tmp_path):
+    """A run config saved before the ADDED_FIELDS existed (the fields deleted), read by the one
+    loader (renames.read_saved_config), builds the same TaskSpec, reward terms and network as one
+    holding them at their old-behaviour defaults: migrated once, when it is read."""
     import jax.numpy as jp
     import ml_collections
 
@@ -215,7 +215,9 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
     for field in renames.ADDED_FIELDS:
         parent, leaf = _parent(saved_before, field)
         del parent[leaf]
-    old = ml_collections.ConfigDict(saved_before)
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(saved_before))
+    old = ml_collections.ConfigDict(renames.read_saved_config(str(path)))
     new = ml_collections.ConfigDict(at_default)
     at_default["env"]["foot_stuck_depth_m"] = 0.1  # away from the default: the specs differ
     assert TaskSpec.from_config(old) == TaskSpec.from_config(new)
@@ -260,18 +262,52 @@ def test_configs_saved_before_an_added_field_read_its_old_behaviour_default():
         renames.added_default("terrain.num_levels")
 
 
-def test_read_added_is_the_one_fallback():
-    """renames.read_added: the section's value, else the ADDED_FIELDS default; a field that is
-    not listed is an error (its fallback would be written somewhere else)."""
-    import ml_collections
-
-    assert renames.read_added({"physics": "mjx"}, "env.physics") == "mjx"
-    assert renames.read_added({}, "env.physics") == "auto"
-    terrain = ml_collections.ConfigDict({"no_promotion_on_fall": True})
-    assert renames.read_added(terrain, "terrain.no_promotion_on_fall") is True
-    assert renames.read_added(terrain, "terrain.stone_curriculum") == "gaps_first"
-    with pytest.raises(KeyError, match="not an added field"):
-        renames.read_added({}, "env.source")
+def test_a_saved_run_config_is_migrated_once_when_read(tmp_path):
+    """renames.read_saved_config, the one reader of a run's config.json: a run saved before the
+    ADDED_FIELDS existed reads each at its old-behaviour default (renames.added_default); a value
+    the run saved is kept; renames are applied and removed fields dropped as before; a section
+    the run lacks is not created (a test's config.json of "network" and "env" gets the env.* and
+    network.* added fields only)."""
+    cfg = load_config(str(Path(REPO) / "configs" / "teacher_cpu.py")).to_dict()
+    saved = json.loads(json.dumps(cfg, default=list))
+    for field in renames.ADDED_FIELDS:
+        parent, leaf = _parent(saved, field)
+        del parent[leaf]
+    saved["reward"]["stall_speed_ms"] = saved["reward"].pop("stall_speed_mps")  # an old name
+    saved["ppo"]["low_noise_share"] = 0.0  # a removed field at its default
+    path = tmp_path / "config.json"
+    path.write_text(json.dumps(saved))
+    out = renames.read_saved_config(str(path))
+    for field, default in renames.ADDED_FIELDS.items():
+        assert _leaf(out, field) == default == renames.added_default(field), field
+    assert _leaf(out, "reward.stall_speed_mps") == cfg["reward"]["stall_speed_mps"]
+    assert "stall_speed_ms" not in out["reward"] and "low_noise_share" not in out["ppo"]
+    # every other field as saved: the migrated config is today's, its added fields at default
+    for field, default in renames.ADDED_FIELDS.items():
+        parent, leaf = _parent(cfg, field)
+        parent[leaf] = default
+    assert out == json.loads(json.dumps(cfg, default=list))
+    # a value the run saved is kept, at any value
+    kept = {"env.physics": "mjx", "network.obs_skip": True, "reward.scales.task": 3.0}
+    for field, value in kept.items():
+        parent, leaf = _parent(saved, field)
+        parent[leaf] = value
+    path.write_text(json.dumps(saved))
+    out = renames.read_saved_config(str(path))
+    for field, value in kept.items():
+        assert _leaf(out, field) == value, field
+    # no section is created: only the dicts the run saved get their added fields
+    path.write_text(json.dumps({"network": {"lstm_hidden_size": 32}, "env": {}}))
+    out = renames.read_saved_config(str(path))
+    assert set(out) == {"network", "env"}
+    assert out["env"] == {
+        f.split(".")[1]: d for f, d in renames.ADDED_FIELDS.items() if f.startswith("env.")
+    }
+    assert set(out["network"]) == {"lstm_hidden_size"} | {
+        f.split(".")[1] for f in renames.ADDED_FIELDS if f.startswith("network.")
+    }
+    no_scales = renames.migrate_config_dict({"reward": {}})["reward"]
+    assert "scales" not in no_scales and no_scales["overall_scale"] == 1.0
     assert renames.HASHED_AT_DEFAULT <= set(renames.ADDED_FIELDS)
 
 
@@ -287,6 +323,12 @@ def test_removed_fields_are_dropped_at_their_default_and_refused_elsewhere():
         "terrain": {"stretch_prob": 0.0, "stretch_min_level": 7},
     }
     out = renames.migrate_config_dict(saved)
+    for field in renames.ADDED_FIELDS:  # filled in where their section is (tested above)
+        *path, leaf = field.split(".")
+        node = out
+        for k in path:
+            node = node.get(k, {})
+        node.pop(leaf, None)
     assert out == {"ppo": {"gamma": 0.998}, "reward": {"scales": {"reach": 10.0}}, "terrain": {}}
     assert saved["ppo"]["low_noise_share"] == 0.0  # a copy: the saved dict is not changed
     for field, value in (

@@ -116,6 +116,9 @@ def test_a_command_line_action_std_cap_outlives_the_runs_network(tmp_path):
     kept = rd.with_run_network(cfg, ckpt, {"network.max_noise_std"})
     assert kept.network.max_noise_std == 0.25
     assert kept.network.lstm_hidden_size == 32 and kept.network.actor_hidden == (16, 8)
+    # saved before network.obs_skip existed: the run's network reads its old default (off), not
+    # teacher_cpu's True (its config.json is read migrated, renames.read_saved_config)
+    assert cfg.network.obs_skip and not kept.network.obs_skip
     assert rd.with_run_network(cfg, ckpt).network.max_noise_std == 0.4  # not on the command line
     assert cfg.network.max_noise_std == 0.25  # the caller's config is not changed
     # The cap reaches the sampled actions: a learned std of 1 is sampled at 0.25.

@@ -650,14 +650,17 @@ def test_size_first_draws_small_stones_at_narrow_gaps(name):
 
 def test_saved_config_without_stone_curriculum_keeps_gaps_first():
     """A run config saved before terrain.stone_curriculum existed trained (and evaluates) on the
-    gaps-first curriculum; a fresh config trains size-first; a bad name is one clear error."""
+    gaps-first curriculum (read migrated, foottof.renames); a fresh config trains size-first; a
+    bad name is one clear error."""
     from configs import _terrain
+    from foottof import renames
 
     fresh = _terrain.get_section()
     assert TileSpec.from_config(fresh).stone_curriculum == "size_first"
-    saved = ml_collections.ConfigDict(fresh.to_dict())
+    saved = fresh.to_dict()
     del saved["stone_curriculum"]
-    assert TileSpec.from_config(saved).stone_curriculum == "gaps_first"
+    migrated = ml_collections.ConfigDict(renames.migrate_config_dict({"terrain": saved})["terrain"])
+    assert TileSpec.from_config(migrated).stone_curriculum == "gaps_first"
     with pytest.raises(ValueError, match="stone_curriculum.*size_first"):
         TileSpec(stone_curriculum="dense")
 

@@ -20,7 +20,6 @@ from foottof.envs.task_spec import TaskSpec
 from foottof.envs.terminations import Ends
 from foottof.perception import check_source
 from foottof.physics import make_physics
-from foottof.renames import read_added
 from foottof.robot import kinematics
 from foottof.robot.model import make_model
 from foottof.terrain import curriculum
@@ -114,10 +113,10 @@ class AnymalToFEnv(Env):
         # Physics backend (env.physics: MJX or MuJoCo C); the PD gains come per step.
         drive = {k: v for k, v in dict(ecfg.control).items() if k not in ("kp", "kd")}
         self.physics = make_physics(
-            str(read_added(ecfg, "env.physics")),
+            str(ecfg.physics),
             self.mj_model,
             drive,
-            int(read_added(ecfg, "env.physics_threads")),
+            int(ecfg.physics_threads),
         )
         self._default_q = jp.asarray(constants.DEFAULT_POSE, jp.float32)
         self._stand_height = kinematics.nominal_base_height(

@@ -9,7 +9,6 @@ import jax.numpy as jp
 from flax import struct
 
 from foottof import config_check
-from foottof.renames import ADDED_FIELDS, read_added
 
 # Terms that are rates (multiplied by the control dt) vs. events (counted once).
 DENSE_TERMS = (
@@ -33,9 +32,9 @@ REWARD_TERMS = SPARSE_TERMS + DENSE_TERMS
 
 @dataclasses.dataclass(frozen=True)
 class RewardSpec:
-    """The ``reward`` section, read once (``RewardSpec.from_config(cfg.reward)``; a field a config
-    saved before it existed lacks takes its old-behaviour default, renames.ADDED_FIELDS): what
-    the env's phases and :func:`compute_terms` read, not the config."""
+    """The ``reward`` section, read once (``RewardSpec.from_config(cfg.reward)``, a complete one:
+    a saved run config is read migrated, renames.read_saved_config): what the env's phases and
+    :func:`compute_terms` read, not the config."""
 
     success_radius_m: float  # ending within this distance of the goal is a success [m]
     guidance_max_speed_mps: float
@@ -66,22 +65,22 @@ class RewardSpec:
         return cls(
             success_radius_m=float(rcfg.success_radius_m),
             guidance_max_speed_mps=float(rcfg.guidance_max_speed_mps),
-            guidance_goal_pay=bool(read_added(rcfg, "reward.guidance_goal_pay")),
+            guidance_goal_pay=bool(rcfg.guidance_goal_pay),
             guidance_decay=(
-                int(read_added(rcfg, "reward.guidance_decay_start_iteration")),
-                int(read_added(rcfg, "reward.guidance_decay_end_iteration")),
+                int(rcfg.guidance_decay_start_iteration),
+                int(rcfg.guidance_decay_end_iteration),
             ),
-            task_window_s=float(read_added(rcfg, "reward.task_window_s")),
-            stall_toward_goal=bool(read_added(rcfg, "reward.stall_toward_goal")),
+            task_window_s=float(rcfg.task_window_s),
+            stall_toward_goal=bool(rcfg.stall_toward_goal),
             stall_speed_mps=float(rcfg.stall_speed_mps),
             stall_grace_s=float(rcfg.stall_grace_s),
             jump_grace_s=float(rcfg.jump_grace_s),
             edge_radius_m=float(rcfg.edge_radius_m),
             edge_height_m=float(rcfg.edge_height_m),
-            overspeed_mps=float(read_added(rcfg, "reward.overspeed_mps")),
-            overall_scale=float(read_added(rcfg, "reward.overall_scale")),
+            overspeed_mps=float(rcfg.overspeed_mps),
+            overall_scale=float(rcfg.overall_scale),
             only_positive=bool(rcfg.only_positive),
-            scales=tuple((name, scale_of(rcfg.scales, name)) for name in REWARD_TERMS),
+            scales=tuple((name, float(rcfg.scales[name])) for name in REWARD_TERMS),
         )
 
     def scale(self, name: str) -> float:
@@ -257,17 +256,8 @@ def scaled_terms(
     out = {}
     for name in REWARD_TERMS:
         dt = control_dt_s if name in DENSE_TERMS else 1.0
-        out[name] = terms[name] * scale_of(scales, name) * dt * float(overall)
+        out[name] = terms[name] * float(scales[name]) * dt * float(overall)
     return out
-
-
-def scale_of(scales, name: str) -> float:
-    """The scale of term ``name``; a term added after a config was saved takes its old-behaviour
-    default (renames.ADDED_FIELDS: off)."""
-    field = f"reward.scales.{name}"
-    if name not in scales and field in ADDED_FIELDS:
-        return float(ADDED_FIELDS[field])
-    return float(scales[name])
 
 
 def total_reward(terms: dict[str, jax.Array], only_positive: bool, valid: jax.Array) -> jax.Array:
@@ -295,10 +285,7 @@ def check_scales(scales) -> None:
     """Raise ValueError for unknown or missing reward terms in `reward.scales`."""
     keys = set(scales.keys())
     unknown = sorted(keys - set(REWARD_TERMS))
-    # terms added after a config was saved may be absent: they take their old default (off)
-    missing = sorted(
-        k for k in set(REWARD_TERMS) - keys if f"reward.scales.{k}" not in ADDED_FIELDS
-    )
+    missing = sorted(set(REWARD_TERMS) - keys)  # every term (saved run configs: read migrated)
     if unknown:
         raise ValueError(f"unknown reward term(s) {unknown}; valid terms: {list(REWARD_TERMS)}")
     if missing:

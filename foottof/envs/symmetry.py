@@ -245,18 +245,17 @@ def make_mirror(cfg) -> Mirror:
     Raises:
       ValueError: sensors without a mirror partner (see :func:`sensor_perm`).
     """
-    from foottof.renames import read_added
     from foottof.sensors.tof import ToFSpec
 
     spec = ToFSpec.from_config(cfg.sensor)
     perm = sensor_perm(tuple(cfg.sensor.sites), spec.tilt_deg, spec.offset_m)
     env = cfg.env
     actor = actor_map(perm, spec.grid)
-    if read_added(env, "env.actor_terrain"):
-        actor = concat(actor, actor_terrain_map(bool(read_added(env, "env.actor_terrain_seen"))))
-    if read_added(env, "env.actor_terrain_fine"):
+    if env.actor_terrain:
+        actor = concat(actor, actor_terrain_map(bool(env.actor_terrain_seen)))
+    if env.actor_terrain_fine:
         from foottof.envs import fine_terrain
 
         actor = concat(actor, SignedPerm(*fine_terrain.mirror_perm()))
-    critic = critic_map(perm, spec.grid, bool(read_added(env, "env.critic_height_scan")))
+    critic = critic_map(perm, spec.grid, bool(env.critic_height_scan))
     return Mirror(obs={"state": actor, "privileged_state": critic}, action=ACTION)

@@ -6,14 +6,13 @@ import dataclasses
 
 from foottof.envs.randomization import RandomizationSpec
 from foottof.envs.rewards import RewardSpec
-from foottof.renames import read_added
 
 
 @dataclasses.dataclass(frozen=True)
 class TaskSpec:
     """The task's settings, read once from the config (``TaskSpec.from_config(cfg)``); every
-    phase of the step reads these, not the config. A field that a config saved before it existed
-    lacks takes its old-behaviour default (renames.ADDED_FIELDS, through renames.read_added)."""
+    phase of the step reads these, not the config (a complete one: a configs/ file, or a saved
+    run config read migrated, renames.read_saved_config)."""
 
     clip_actions: float
     kp: float
@@ -59,20 +58,20 @@ class TaskSpec:
             knee_contact_terminates=bool(e.knee_contact_terminates),
             fall_height_above_floor_m=float(e.fall_height_above_floor_m),
             foot_fall_z_m=float(e.foot_fall_z_m),
-            foot_stuck_depth_m=float(read_added(e, "env.foot_stuck_depth_m")),
+            foot_stuck_depth_m=float(e.foot_stuck_depth_m),
             max_tilt_deg=float(e.max_tilt_deg),
             down_progress_frac=float(t.down_progress_frac),
             up_progress_frac=float(t.up_progress_frac),
-            no_promotion_on_fall=bool(read_added(t, "terrain.no_promotion_on_fall")),
+            no_promotion_on_fall=bool(t.no_promotion_on_fall),
             init_level_max=int(t.init_level_max),
             init_joint_noise_rad=float(e.init_joint_noise_rad),
             init_roll_pitch_rad=float(e.init_roll_pitch_rad),
             spawn_height_offset_m=float(e.spawn_height_offset_m),
             clip_observations=float(e.clip_observations),
-            critic_height_scan=bool(read_added(e, "env.critic_height_scan")),
-            actor_terrain=bool(read_added(e, "env.actor_terrain")),
-            actor_terrain_seen=bool(read_added(e, "env.actor_terrain_seen")),
-            actor_terrain_fine=bool(read_added(e, "env.actor_terrain_fine")),
+            critic_height_scan=bool(e.critic_height_scan),
+            actor_terrain=bool(e.actor_terrain),
+            actor_terrain_seen=bool(e.actor_terrain_seen),
+            actor_terrain_fine=bool(e.actor_terrain_fine),
             steps_per_iteration=int(cfg.ppo.num_steps),
             reward=RewardSpec.from_config(cfg.reward),
             randomization=RandomizationSpec.from_config(e.randomization),

@@ -9,7 +9,6 @@ run can hold its box tiles at the top while its stepping stones stay at level 0.
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import warnings
 
@@ -91,9 +90,9 @@ def read_rollout_leaves(run_dir: str, names: tuple[str, ...], step: int | None =
 
 
 def run_terrain(run_dir: str) -> tuple[ml_collections.ConfigDict, int]:
-    """(terrain section, stage) of ``run_dir``'s saved config (renamed fields migrated)."""
-    with open(os.path.join(run_dir, "config.json")) as f:
-        cfg = ml_collections.ConfigDict(renames.migrate_config_dict(json.load(f)))
+    """(terrain section, stage) of ``run_dir``'s saved config, read migrated
+    (renames.read_saved_config)."""
+    cfg = ml_collections.ConfigDict(renames.read_saved_config(os.path.join(run_dir, "config.json")))
     return cfg.terrain, int(cfg.stage)
 
 
@@ -102,11 +101,11 @@ def smallest_stones(
 ) -> dict[str, float]:
     """Nominal stone size [m] at the highest level that holds at least ``share`` of the type's
     envs, per stone type of ``counts``: the smallest stone the type trains on (a few envs
-    promoted once do not count). Its curriculum: the run's terrain.stone_curriculum,
-    "gaps_first" where the run was saved without one."""
+    promoted once do not count). Its curriculum: terrain.stone_curriculum (a run saved without
+    one reads "gaps_first", migrated by run_terrain)."""
     from foottof.terrain.tiles import STONE_TYPES, stone_params
 
-    curriculum = str(renames.read_added(terrain, "terrain.stone_curriculum"))
+    curriculum = str(terrain.stone_curriculum)
     ranges = terrain[f"stage{stage}_difficulty"]
     out = {}
     for name, c in counts.items():
@@ -171,7 +170,7 @@ def main(argv: list[str] | None = None) -> None:
         stones = smallest_stones(terrain, stage, counts)
     except (FileNotFoundError, ValueError) as e:
         raise SystemExit(f"error: {e}") from None
-    curriculum = renames.read_added(terrain, "terrain.stone_curriculum")
+    curriculum = terrain.stone_curriculum
     print(f"envs per curriculum level, checkpoint {step} (stone curriculum {curriculum})")
     print(format_table(counts, stones))
 

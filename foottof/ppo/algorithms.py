@@ -14,7 +14,6 @@ from typing import NamedTuple
 import ml_collections
 
 from foottof.ppo import distill, losses
-from foottof.renames import read_added
 
 
 class Algorithm(NamedTuple):
@@ -59,8 +58,8 @@ def from_config(cfg: ml_collections.ConfigDict) -> Algorithm:
     """Distillation where ``train.teacher`` is set (ppo.reconstruction_weight), else PPO (the
     ppo section's clip_param, value_loss_coef, entropy_coef, use_clipped_value_loss)."""
     p, train_cfg = cfg.ppo, cfg.get("train", None)
-    if train_cfg is not None and read_added(train_cfg, "train.teacher"):
-        return distillation(float(read_added(p, "ppo.reconstruction_weight")))
+    if train_cfg is not None and train_cfg.teacher:
+        return distillation(float(p.reconstruction_weight))
     return ppo(
         clip_param=float(p.clip_param),
         value_loss_coef=float(p.value_loss_coef),

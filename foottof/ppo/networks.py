@@ -12,7 +12,6 @@ import ml_collections
 from brax.training.acme import running_statistics
 
 from foottof import config_check, limits
-from foottof.renames import read_added
 
 Carry = (
     Any  # {'actor': ((c, h), ...), 'critic': ((c, h), ...)} per LSTM layer, each (B, H); () for MLP
@@ -284,8 +283,8 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
     """Builds the actor-critic from c.network (see configs/_ppo.py)."""
     n = network_cfg
     config_check.check_sections({"network": n}, ("network",))  # the rules, held there once
-    max_std = float(read_added(n, "network.max_noise_std"))
-    obs_skip = bool(read_added(n, "network.obs_skip"))
+    max_std = float(n.max_noise_std)
+    obs_skip = bool(n.obs_skip)
     if obs_skip and n.policy != "lstm":
         raise ValueError(
             f"network.obs_skip=True needs network.policy='lstm' (got {n.policy!r}: an MLP "
@@ -302,6 +301,6 @@ def make_networks(action_size: int, network_cfg: ml_collections.ConfigDict) -> N
         init_noise_std=float(n.init_noise_std),
         max_noise_std=max_std,
         obs_skip=obs_skip,
-        reconstruct_size=int(read_added(n, "network.reconstruct")),
+        reconstruct_size=int(n.reconstruct),
     )
     return Networks(module, bool(n.normalize_observations), float(n.normalizer_std_eps))

@@ -153,8 +153,7 @@ def _write_config(cfg: ml_collections.ConfigDict, run_dir: str) -> None:
     path = os.path.join(run_dir, "config.json")
     text = cfg.to_json_best_effort(indent=2, sort_keys=True)
     if os.path.exists(path):
-        with open(path) as f:
-            old = renames.migrate_config_dict(json.load(f))
+        old = renames.read_saved_config(path)
         new = json.loads(text)
         changed = sorted(k for k in set(old) | set(new) if old.get(k) != new.get(k))
         if changed:
@@ -290,7 +289,7 @@ def run(
         except FileExistsError as e:
             print(f"[runner] WARNING: {e}")
     try:
-        if isinstance(env, TeacherEnv) and renames.read_added(cfg.train, "train.teacher"):
+        if isinstance(env, TeacherEnv) and cfg.train.teacher:
             teacher.record_teacher(run_dir, cfg, env, resume)  # teacher.json: pins the teacher
         return _run(cfg, env, run_dir, resume, init_from, on_iteration, main, init_params)
     except Exception as e:  # a collective of start-up, restore or compile failed: a peer is gone
@@ -365,8 +364,9 @@ def _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_p
                 init_from,
                 state.params,
                 state.normalizer,
-                # a teacher (env.actor_terrain) may start from a sensor-only policy
-                grow_actor=bool(renames.read_added(cfg.get("env", {}), "env.actor_terrain")),
+                # a teacher (env.actor_terrain) may start from a sensor-only policy; a config
+                # without the ToF env's section (a toy env's) has none
+                grow_actor=bool("env" in cfg and cfg.env.actor_terrain),
             )
         except ckpt.CheckpointUnreadable as e:
             checkpointer.close()
@@ -374,7 +374,7 @@ def _starting_state(cfg, trainer, state, checkpointer, resume, init_from, init_p
         except BaseException:
             checkpointer.close()
             raise
-        if renames.read_added(cfg.get("env", {}), "env.actor_terrain_fine"):
+        if "env" in cfg and cfg.env.actor_terrain_fine:
             from foottof.envs import fine_terrain
 
             normalizer, seeded = fine_terrain.seed_normalizer(normalizer)

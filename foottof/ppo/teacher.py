@@ -16,7 +16,7 @@ import numpy as np
 from foottof.ppo import checkpoint as ckpt
 from foottof.ppo import networks as net
 from foottof.ppo.distill import TeacherEnv, student_from_teacher
-from foottof.renames import read_added
+from foottof.renames import read_saved_config
 
 
 def load_teacher(path: str, env, network_cfg):
@@ -46,8 +46,9 @@ def load_teacher(path: str, env, network_cfg):
 
 
 def teacher_network_cfg(path: str, default):
-    """The teacher's c.network from its run config (config.json beside or above ``path``); the
-    student's ``default`` where it has none, without the student's belief decoder."""
+    """The teacher's c.network from its run config (config.json beside or above ``path``, read
+    migrated); the student's ``default`` where it has none, without the student's belief
+    decoder."""
     import ml_collections
 
     out = ml_collections.ConfigDict(dict(default))
@@ -63,25 +64,24 @@ def teacher_network_cfg(path: str, default):
 
 def teacher_sees_only_seen(path: str) -> bool:
     """The teacher's env.actor_terrain_seen, from its run config (False where it has none)."""
-    env = _saved_run_config(path).get("env", {})
-    return bool(read_added(env, "env.actor_terrain_seen"))
+    env = _saved_run_config(path).get("env")
+    return bool(env is not None and env["actor_terrain_seen"])
 
 
 def teacher_reads_fine(path: str) -> bool:
     """The teacher's env.actor_terrain_fine, from its run config (False where it has none)."""
-    env = _saved_run_config(path).get("env", {})
-    return bool(read_added(env, "env.actor_terrain_fine"))
+    env = _saved_run_config(path).get("env")
+    return bool(env is not None and env["actor_terrain_fine"])
 
 
 def _saved_run_config(path: str) -> dict:
-    """The run config (config.json beside or above ``path``) as a dict; {} where it has none."""
+    """The run config (config.json beside or above ``path``) as a dict, migrated
+    (renames.read_saved_config: a field added since it was saved at its old-behaviour default);
+    {} where it has none."""
     from foottof.ppo import run_dir as run_dirs
 
     config = run_dirs.run_config_path(path)
-    if config is None:
-        return {}
-    with open(config) as f:
-        return json.load(f)
+    return {} if config is None else read_saved_config(config)
 
 
 TEACHER_RECORD = "teacher.json"  # in a distillation run folder: which teacher it learns from
@@ -153,7 +153,7 @@ def record_teacher(run_dir: str, cfg, env: TeacherEnv, resume: bool) -> dict:
         str(cfg.train.teacher),
         teacher_fingerprint(env.teacher_params, env.teacher_normalizer),
         resume,
-        bool(read_added(cfg.train, "train.teacher_change_ok")),
+        bool(cfg.train.teacher_change_ok),
     )
 
 
@@ -204,7 +204,7 @@ def make_distill_env(cfg):
 
     path = str(cfg.train.teacher)
     check_teacher_path(path)
-    if read_added(cfg.env, "env.actor_terrain"):
+    if cfg.env.actor_terrain:
         raise ValueError(
             "env.actor_terrain=True in a distillation config: the config is the student's "
             "(sensors only); the teacher's terrain inputs are added for it"
@@ -220,7 +220,7 @@ def make_distill_env(cfg):
     shape = jax.eval_shape(env.reset, jax.ShapeDtypeStruct((1, 2), jp.uint32))
     student_obs_size = student_view_size(
         shape.obs[net.ACTOR_KEY].shape[-1],
-        read_added(cfg.train, "train.student_privileged_inputs"),
+        cfg.train.student_privileged_inputs,
         seen,
         fine,
     )

@@ -35,7 +35,6 @@ from foottof.limits import LR_SCHEDULES  # noqa: F401 (re-exported)
 from foottof.ppo import algorithms, losses
 from foottof.ppo import networks as net
 from foottof.ppo import symmetry as sym
-from foottof.renames import read_added
 
 AXIS = "data"  # mesh axis over envs (all devices of all hosts)
 
@@ -181,7 +180,7 @@ class Settings:
             lr_min=float(ppo.lr_min),
             lr_max=float(ppo.lr_max),
             algorithm=algorithms.from_config(cfg),
-            symmetry=bool(read_added(ppo, "ppo.symmetry")),
+            symmetry=bool(ppo.symmetry),
         )
 
 

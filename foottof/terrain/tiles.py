@@ -12,7 +12,6 @@ import numpy as np
 
 from foottof import config_check, constants
 from foottof.limits import ENSEMBLE_KNOT, STONE_TYPES  # noqa: F401 (re-exported)
-from foottof.renames import read_added
 
 # The paper's nine types, in order: stage 1 (first five), then the four stage-2 additions.
 TERRAIN_TYPES = (
@@ -244,8 +243,7 @@ class TileSpec:
             goal_length_m=float(cfg.goal_length_m),
             pit_z_m=float(cfg.pit_z_m),
             z_range_m=float(cfg.z_range_m),
-            # a config saved before the field existed trained on "gaps_first" (foottof.renames)
-            stone_curriculum=str(read_added(cfg, "terrain.stone_curriculum")),
+            stone_curriculum=str(cfg.stone_curriculum),
         )
 
 

@@ -5,12 +5,11 @@ Imports no JAX.
 
 import copy
 import glob
-import json
 import os
 import shutil
 import time
 
-from foottof.renames import read_added
+from foottof.renames import read_saved_config
 
 CHECKPOINT_SUBDIR = "checkpoints"  # <run_dir>/checkpoints/<iteration>/ (storage.checkpoint)
 SHIPPED_POLICY_DIRS = ("policies/latest",)  # checked (relative to the repo root) before runs/
@@ -185,8 +184,8 @@ CURRICULUM_FIELD = "terrain.stone_curriculum"
 
 def with_run_curriculum(cfg, run_config: str | None, overrides=()):
     """`cfg` with the stone curriculum its run trained on (``terrain.stone_curriculum`` of the
-    run's config.json at ``run_config``; "gaps_first" where it was saved before the field
-    existed), unless the command line set it (``overrides``): a resumed run keeps its
+    run's config.json at ``run_config``, read migrated: "gaps_first" where it was saved before
+    the field existed), unless the command line set it (``overrides``): a resumed run keeps its
     curriculum, and a policy is evaluated on the curriculum it learned (at the ensemble's
     difficulty every curriculum draws the same stones). A copy; ``cfg`` when nothing changes.
 
@@ -194,12 +193,11 @@ def with_run_curriculum(cfg, run_config: str | None, overrides=()):
       (config, note): note is a line saying what was taken from the run, or None."""
     if run_config is None or not os.path.isfile(run_config) or CURRICULUM_FIELD in set(overrides):
         return cfg, None
-    with open(run_config) as f:
-        saved = json.load(f)
+    saved = read_saved_config(run_config)
     if "terrain" not in saved:
         return cfg, None
-    value = str(read_added(saved["terrain"], CURRICULUM_FIELD))
-    if cfg.terrain.get("stone_curriculum") == value:
+    value = str(saved["terrain"]["stone_curriculum"])
+    if cfg.terrain.stone_curriculum == value:
         return cfg, None
     c = copy.deepcopy(cfg)
     with c.unlocked():
@@ -213,7 +211,8 @@ def with_run_curriculum(cfg, run_config: str | None, overrides=()):
 
 def with_run_network(cfg, checkpoint: str | None, overrides=()):
     """`cfg` (a ConfigDict) with c.network, and the env fields that shape the network's inputs
-    (RUN_INPUT_FIELDS), from the checkpoint's run config (if it has one).
+    (RUN_INPUT_FIELDS), from the checkpoint's run config (if it has one), read migrated: a field
+    added since the run was saved takes its old-behaviour default (renames.ADDED_FIELDS).
 
     Args:
       overrides: the dotted names the user set on the command line (e.g. the keys of
@@ -226,8 +225,7 @@ def with_run_network(cfg, checkpoint: str | None, overrides=()):
     path = run_config_path(checkpoint) if checkpoint else None
     if path is None:
         return cfg
-    with open(path) as f:
-        saved = json.load(f)
+    saved = read_saved_config(path)  # migrated: fields added since the run at their old default
     if "network" not in saved:
         return cfg
     overrides = set(overrides)
@@ -235,9 +233,7 @@ def with_run_network(cfg, checkpoint: str | None, overrides=()):
     runs = [
         ("network", k, tuple(v) if isinstance(v, list) else v) for k, v in saved["network"].items()
     ]
-    runs += [
-        ("env", k, bool(read_added(saved.get("env", {}), f"env.{k}"))) for k in RUN_INPUT_FIELDS
-    ]
+    runs += [("env", k, bool(saved["env"][k])) for k in RUN_INPUT_FIELDS if "env" in saved]
     with c.unlocked():
         for section, key, value in runs:
             name = f"{section}.{key}"

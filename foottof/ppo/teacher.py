@@ -64,14 +64,18 @@ def teacher_network_cfg(path: str, default):
 
 def teacher_sees_only_seen(path: str) -> bool:
     """The teacher's env.actor_terrain_seen, from its run config (False where it has none)."""
-    env = _saved_run_config(path).get("env")
-    return bool(env is not None and env["actor_terrain_seen"])
+    return _run_env_flag(path, "actor_terrain_seen")
 
 
 def teacher_reads_fine(path: str) -> bool:
     """The teacher's env.actor_terrain_fine, from its run config (False where it has none)."""
+    return _run_env_flag(path, "actor_terrain_fine")
+
+
+def _run_env_flag(path: str, key: str) -> bool:
+    """env.<key> of the run config beside or above ``path`` (False where it has no env section)."""
     env = _saved_run_config(path).get("env")
-    return bool(env is not None and env["actor_terrain_fine"])
+    return bool(env is not None and env[key])
 
 
 def _saved_run_config(path: str) -> dict:
